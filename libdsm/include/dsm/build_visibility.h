@@ -1,0 +1,28 @@
+// From the sample rays of one pixel to its compressed visibility function:
+// transmittance (LV §3.2) -> sweep (LV §5.1) -> compressor (LV §3.3), with the
+// multilayer restarts of Xie et al. §5.1.
+#pragma once
+
+#include <span>
+
+#include "dsm/compressor.h"
+#include "dsm/transmittance.h"
+#include "dsm/visibility.h"
+
+namespace dsm {
+
+/// The visibility function of one pixel: the filter-weighted average of the
+/// transmittance of `rays` (weights[k] for rays[k]), compressed with
+/// `options`. Channel count and counts come from `options`.
+///
+/// With options.maxLayers = K > 1, when the compressor ends a layer at depth
+/// z_e (all light blocked within tolerance), the transmittances are rebuilt
+/// from what lies strictly beyond z_e and swept again into the next layer, up
+/// to K layers. The sum of the counts equals the number of surface hits with
+/// non-zero opacity plus volume steps over all rays.
+///
+/// Errors name the ray index and the offending hit or sample.
+VisibilityFunction buildVisibility(std::span<const SampleRay> rays, std::span<const double> weights,
+                                   const CompressorOptions& options);
+
+}  // namespace dsm

@@ -1,0 +1,55 @@
+// Transmittance of one sample ray from the light (Lokovic & Veach 2000, §3.2).
+#pragma once
+
+#include <array>
+#include <limits>
+#include <span>
+
+#include "dsm/visibility.h"
+
+namespace dsm {
+
+/// A surface crossed by the ray: depth and opacity per channel in [0, 1]. For a
+/// monochrome ray only opacity[0] is used.
+struct SurfaceHit {
+    float z = 0.0f;
+    std::array<float, kMaxChannels> opacity{1.0f, 1.0f, 1.0f};
+};
+
+/// A sample of a volume's extinction coefficient kappa (per unit depth, >= 0)
+/// at depth z. Between two samples kappa is linear; outside the first and last
+/// sample of a ray there is no volume.
+struct VolumeSample {
+    float z = 0.0f;
+    float extinction = 0.0f;
+};
+
+/// Everything one sample ray met, in any order; transmittance() sorts a copy.
+struct SampleRay {
+    std::span<const SurfaceHit> hits;
+    std::span<const VolumeSample> volume;
+};
+
+/// Builds the transmittance function tau(z) = tau_s(z) * tau_v(z) of one ray.
+///
+/// - Surfaces composite as products of (1 - opacity); each hit becomes a
+///   vertical step (two vertices at its depth). Several hits at one depth make
+///   one step. Hits with opacity exactly 0 in every channel block nothing and
+///   are left out (no vertex, no count).
+/// - The volume transmittance multiplies, per segment between consecutive
+///   samples, T_i = exp(-(z_{i+1} - z_i) (kappa_i + kappa_{i+1}) / 2).
+/// - tau is evaluated at the merged vertices of both and is linear between them.
+/// - Counts (when `withCounts`): 1 per surface hit, on the vertex after its
+///   step; 1 per volume step, on the vertex that ends the step.
+/// - `zStart`: only what lies strictly beyond zStart counts (used to start a new
+///   MTSM layer behind an opaque one). Hits at z <= zStart are dropped; a volume
+///   segment that straddles zStart is cut there, with kappa interpolated.
+///
+/// Computed in double and stored as float; underflow ends at exactly 0, never NaN.
+/// Throws dsm::Error naming the hit or sample index and the bad value for
+/// non-finite or negative depths, opacities outside [0, 1] and non-finite or
+/// negative extinction.
+VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts,
+                                 float zStart = -std::numeric_limits<float>::infinity());
+
+}  // namespace dsm

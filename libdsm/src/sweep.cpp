@@ -1,0 +1,133 @@
+#include "dsm/sweep.h"
+
+#include <algorithm>
+#include <cmath>
+#include <queue>
+#include <vector>
+
+#include "dsm/error.h"
+#include "text.h"
+
+namespace dsm {
+
+namespace {
+
+// Heap entry: the depth of an input's next vertex, and the input index. Ties
+// are broken by index so the order of floating-point updates is fixed.
+struct Event {
+    float z;
+    std::uint32_t input;
+};
+struct Later {
+    bool operator()(const Event& a, const Event& b) const {
+        return a.z > b.z || (a.z == b.z && a.input > b.input);
+    }
+};
+
+// A removed slope term this many times larger than the remaining sum means
+// the running sum may have lost digits to cancellation: recompute it exactly.
+constexpr double kCancellationLimit = 1e6;
+
+}  // namespace
+
+std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span<const double> weights,
+                           int channels, VertexSink& sink) {
+    if (channels != 1 && channels != kMaxChannels)
+        throw Error(detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
+    if (inputs.size() != weights.size())
+        throw Error(detail::concat("sweep: ", inputs.size(), " inputs but ", weights.size(), " weights"));
+    if (inputs.size() > UINT32_MAX) throw Error("sweep: too many inputs");
+    double weightSum = 0.0;
+    for (std::size_t k = 0; k < inputs.size(); ++k) {
+        if (!std::isfinite(weights[k]) || weights[k] < 0.0)
+            throw Error(detail::concat("sweep: weight ", weights[k], " of input ", k, " is not finite and >= 0"));
+        if (inputs[k].channels() != channels)
+            throw Error(detail::concat("sweep: input ", k, " has ", inputs[k].channels(), " channels, expected ",
+                                       channels));
+        if (inputs[k].layerCount() != 1)
+            throw Error(detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
+                                       " layers; the sweep averages single-layer functions"));
+        weightSum += weights[k];
+    }
+    if (inputs.empty()) return std::nullopt;
+    if (!(weightSum > 0.0) || !std::isfinite(weightSum))
+        throw Error(detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
+
+    const std::size_t n = inputs.size();
+    const std::size_t nc = static_cast<std::size_t>(channels);
+    std::vector<double> w(n);
+    for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
+    std::vector<std::size_t> next(n, 0);
+    std::vector<double> slope(n * nc, 0.0);  // current slope of each input, per channel
+
+    std::priority_queue<Event, std::vector<Event>, Later> heap;
+    for (std::size_t k = 0; k < n; ++k)
+        if (w[k] > 0.0 && !inputs[k].empty()) heap.push({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+
+    double value[kMaxChannels] = {1.0, 1.0, 1.0};
+    double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
+    double lastEmitted[kMaxChannels] = {1.0, 1.0, 1.0};
+    double left[kMaxChannels];
+    double removed[kMaxChannels];
+    double zCurrent = 0.0;
+
+    while (!heap.empty()) {
+        const float z = heap.top().z;
+        for (std::size_t c = 0; c < nc; ++c) {
+            left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
+            left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
+            value[c] = left[c];
+            removed[c] = 0.0;
+        }
+        zCurrent = z;
+
+        std::uint64_t count = 0;
+        while (!heap.empty() && heap.top().z == z) {
+            const std::size_t k = heap.top().input;
+            heap.pop();
+            const VisibilityFunction& f = inputs[k];
+            const std::size_t first = next[k];
+            std::size_t last = first;
+            count += f.count(first);
+            while (last + 1 < f.size() && f.z(last + 1) == z) count += f.count(++last);
+            const bool more = last + 1 < f.size();
+            for (std::size_t c = 0; c < nc; ++c) {
+                const int ch = static_cast<int>(c);
+                const double before = first == 0 ? 1.0 : f.value(first, ch);
+                const double after = f.value(last, ch);
+                value[c] += w[k] * (after - before);
+                const double newSlope =
+                    more ? (static_cast<double>(f.value(last + 1, ch)) - after) /
+                               (static_cast<double>(f.z(last + 1)) - static_cast<double>(z))
+                         : 0.0;
+                double& s = slope[k * nc + c];
+                removed[c] = std::max(removed[c], std::abs(w[k] * s));
+                outSlope[c] += w[k] * (newSlope - s);
+                s = newSlope;
+            }
+            next[k] = last + 1;
+            if (more) heap.push({f.z(last + 1), static_cast<std::uint32_t>(k)});
+        }
+
+        bool step = false;
+        for (std::size_t c = 0; c < nc; ++c) {
+            if (removed[c] > kCancellationLimit * std::abs(outSlope[c])) {
+                double exact = 0.0;
+                for (std::size_t k = 0; k < n; ++k) exact += w[k] * slope[k * nc + c];
+                outSlope[c] = exact;
+            }
+            outSlope[c] = std::min(outSlope[c], 0.0);
+            value[c] = std::clamp(value[c], 0.0, left[c]);
+            if (value[c] != left[c]) step = true;
+        }
+        if (count > UINT32_MAX)
+            throw Error(detail::concat("sweep: ", count, " samples at depth ", z, " exceed the 2^32 - 1 a vertex holds"));
+        const std::uint32_t count32 = static_cast<std::uint32_t>(count);
+        if (!sink.push(z, left, step ? 0u : count32)) return z;
+        if (step && !sink.push(z, value, count32)) return z;
+        std::copy(value, value + nc, lastEmitted);
+    }
+    return std::nullopt;
+}
+
+}  // namespace dsm

@@ -1,0 +1,144 @@
+#include "dsm/transmittance.h"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "dsm/error.h"
+#include "text.h"
+
+namespace dsm {
+
+namespace {
+
+void checkHits(std::span<const SurfaceHit> hits, int channels) {
+    for (std::size_t i = 0; i < hits.size(); ++i) {
+        const SurfaceHit& h = hits[i];
+        if (!std::isfinite(h.z) || h.z < 0.0f)
+            throw Error(detail::concat("surface hit ", i, ": depth ", h.z, " is not a finite value >= 0"));
+        for (int c = 0; c < channels; ++c) {
+            const float o = h.opacity[static_cast<std::size_t>(c)];
+            if (!(o >= 0.0f && o <= 1.0f))
+                throw Error(detail::concat("surface hit ", i, " channel ", c, ": opacity ", o, " is outside [0, 1]"));
+        }
+    }
+}
+
+void checkVolume(std::span<const VolumeSample> volume) {
+    for (std::size_t i = 0; i < volume.size(); ++i) {
+        const VolumeSample& s = volume[i];
+        if (!std::isfinite(s.z) || s.z < 0.0f)
+            throw Error(detail::concat("volume sample ", i, ": depth ", s.z, " is not a finite value >= 0"));
+        if (!std::isfinite(s.extinction) || s.extinction < 0.0f)
+            throw Error(detail::concat("volume sample ", i, ": extinction ", s.extinction,
+                                       " is not a finite value >= 0"));
+    }
+}
+
+bool blocksNothing(const SurfaceHit& h, int channels) {
+    for (int c = 0; c < channels; ++c)
+        if (h.opacity[static_cast<std::size_t>(c)] != 0.0f) return false;
+    return true;
+}
+
+}  // namespace
+
+VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts, float zStart) {
+    if (channels != 1 && channels != kMaxChannels)
+        throw Error(detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
+    checkHits(ray.hits, channels);
+    checkVolume(ray.volume);
+
+    std::vector<SurfaceHit> hits;
+    hits.reserve(ray.hits.size());
+    for (const SurfaceHit& h : ray.hits)
+        if (h.z > zStart && !blocksNothing(h, channels)) hits.push_back(h);
+    std::stable_sort(hits.begin(), hits.end(), [](const SurfaceHit& a, const SurfaceHit& b) { return a.z < b.z; });
+
+    std::vector<VolumeSample> volume(ray.volume.begin(), ray.volume.end());
+    std::stable_sort(volume.begin(), volume.end(),
+                     [](const VolumeSample& a, const VolumeSample& b) { return a.z < b.z; });
+    // Keep only the volume beyond zStart, cutting a straddling segment at zStart.
+    {
+        const auto firstBeyond = std::find_if(volume.begin(), volume.end(),
+                                              [&](const VolumeSample& s) { return s.z > zStart; });
+        if (firstBeyond != volume.begin()) {
+            std::vector<VolumeSample> kept;
+            if (firstBeyond != volume.end()) {
+                const VolumeSample& a = *(firstBeyond - 1);
+                const VolumeSample& b = *firstBeyond;
+                const double t = (static_cast<double>(zStart) - a.z) / (static_cast<double>(b.z) - a.z);
+                kept.push_back({zStart, static_cast<float>(a.extinction + t * (b.extinction - a.extinction))});
+            }
+            kept.insert(kept.end(), firstBeyond, volume.end());
+            volume = std::move(kept);
+        }
+    }
+
+    // Volume transmittance at every volume sample, from the accumulated optical
+    // depth (one exp per sample keeps the product accurate and underflow exact).
+    std::vector<double> volumeTau(volume.size(), 1.0);
+    double opticalDepth = 0.0;
+    for (std::size_t i = 1; i < volume.size(); ++i) {
+        const double dz = static_cast<double>(volume[i].z) - volume[i - 1].z;
+        if (dz > 0.0) opticalDepth += dz * (static_cast<double>(volume[i - 1].extinction) + volume[i].extinction) * 0.5;
+        volumeTau[i] = std::exp(-opticalDepth);
+    }
+
+    VisibilityFunction out(channels, withCounts);
+    out.reserve(2 * hits.size() + volume.size());
+    double surfaceTau[kMaxChannels] = {1.0, 1.0, 1.0};
+    float emitted[kMaxChannels];
+    std::size_t h = 0, s = 0;
+    auto emit = [&](float z, double tauV, std::uint32_t count) {
+        for (int c = 0; c < channels; ++c) {
+            float v = static_cast<float>(surfaceTau[c] * tauV);
+            // Rounding is monotone, but guard the invariant explicitly.
+            if (!out.empty()) v = std::min(v, out.value(out.size() - 1, c));
+            emitted[c] = v;
+        }
+        out.append(z, emitted, count);
+    };
+
+    while (h < hits.size() || s < volume.size()) {
+        const float z = (s < volume.size() && (h >= hits.size() || volume[s].z <= hits[h].z)) ? volume[s].z
+                                                                                              : hits[h].z;
+        // Volume transmittance at z: exact at a sample, linear between samples.
+        double tauV;
+        bool atSample = false;
+        std::uint32_t volumeCount = 0;
+        while (s < volume.size() && volume[s].z == z) {
+            if (s > 0) ++volumeCount;  // a volume step ends here
+            atSample = true;
+            ++s;
+        }
+        if (atSample) {
+            tauV = volumeTau[s - 1];
+        } else if (s == 0) {
+            tauV = 1.0;
+        } else if (s == volume.size()) {
+            tauV = volumeTau.back();
+        } else {
+            const double t = (static_cast<double>(z) - volume[s - 1].z) /
+                             (static_cast<double>(volume[s].z) - volume[s - 1].z);
+            tauV = volumeTau[s - 1] + t * (volumeTau[s] - volumeTau[s - 1]);
+        }
+        // Inside the volume the function is sloped, so the vertex before a step
+        // is needed to keep the interpolation exact; elsewhere it repeats the
+        // previous value and is left out.
+        const bool insideVolume = !volume.empty() && z > volume.front().z && z < volume.back().z;
+        if (atSample || insideVolume) emit(z, tauV, withCounts ? volumeCount : 0);
+
+        std::uint32_t hitCount = 0;
+        while (h < hits.size() && hits[h].z == z) {
+            for (int c = 0; c < channels; ++c)
+                surfaceTau[c] *= 1.0 - static_cast<double>(hits[h].opacity[static_cast<std::size_t>(c)]);
+            ++hitCount;
+            ++h;
+        }
+        if (hitCount > 0) emit(z, tauV, withCounts ? hitCount : 0);
+    }
+    return out;
+}
+
+}  // namespace dsm

@@ -1,0 +1,188 @@
+#include "dsm/visibility.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "dsm/error.h"
+#include "dsm/vertex_sink.h"
+#include "text.h"
+
+namespace dsm {
+
+namespace {
+
+// Linear interpolation on the segment (za, va) -> (zb, vb) with za < zb.
+inline double lerpSegment(double za, double va, double zb, double vb, double z) {
+    const double t = (z - za) / (zb - za);
+    return va + t * (vb - va);
+}
+
+}  // namespace
+
+VisibilityFunction::VisibilityFunction(int channels, bool withCounts)
+    : channels_(channels), withCounts_(withCounts) {
+    if (channels != 1 && channels != kMaxChannels)
+        throw Error(detail::concat("visibility function: channel count ", channels, " is not 1 or 3"));
+}
+
+std::uint64_t VisibilityFunction::totalCount() const {
+    std::uint64_t total = 0;
+    for (std::uint32_t c : count_) total += c;
+    return total;
+}
+
+void VisibilityFunction::append(float z, const float* values, std::uint32_t count) {
+    z_.push_back(z);
+    v_.insert(v_.end(), values, values + channels_);
+    if (withCounts_) count_.push_back(count);
+}
+
+void VisibilityFunction::setLastValues(const float* values) {
+    std::copy(values, values + channels_, v_.end() - channels_);
+}
+
+void VisibilityFunction::addToLastCount(std::uint64_t count) {
+    if (!withCounts_ || count_.empty()) return;
+    const std::uint64_t sum = count_.back() + count;
+    if (sum > UINT32_MAX)
+        throw Error(detail::concat("visibility function: sample count ", sum, " at vertex ", count_.size() - 1,
+                                   " exceeds 2^32 - 1"));
+    count_.back() = static_cast<std::uint32_t>(sum);
+}
+
+void VisibilityFunction::reserve(std::size_t vertices) {
+    z_.reserve(vertices);
+    v_.reserve(vertices * static_cast<std::size_t>(channels_));
+    if (withCounts_) count_.reserve(vertices);
+}
+
+void VisibilityFunction::clear() {
+    z_.clear();
+    v_.clear();
+    count_.clear();
+    layerBegin_.clear();
+}
+
+double VisibilityFunction::evaluateRange(std::size_t begin, std::size_t end, double z, int channel) const {
+    const auto first = z_.begin() + static_cast<std::ptrdiff_t>(begin);
+    const auto last = z_.begin() + static_cast<std::ptrdiff_t>(end);
+    const std::size_t k = static_cast<std::size_t>(
+        std::upper_bound(first, last, z, [](double q, float zk) { return q < zk; }) - z_.begin());
+    if (k == begin) return 1.0;
+    if (k == end) return value(end - 1, channel);
+    return lerpSegment(z_[k - 1], value(k - 1, channel), z_[k], value(k, channel), z);
+}
+
+double VisibilityFunction::evaluate(double z, int channel) const {
+    const std::size_t end0 = layerEnd(0);
+    if (layerCount() > 1 && z >= z_[end0 - 1]) return 0.0;
+    return evaluateRange(0, end0, z, channel);
+}
+
+void VisibilityFunction::evaluate(double z, double* out) const {
+    for (int c = 0; c < channels_; ++c) out[c] = evaluate(z, c);
+}
+
+double VisibilityFunction::evaluateLayer(std::size_t layer, double z, int channel) const {
+    if (layer >= layerCount()) return 1.0;
+    return evaluateRange(layerBegin(layer), layerEnd(layer), z, channel);
+}
+
+void VisibilityFunction::validate() const {
+    const std::size_t n = z_.size();
+    if (v_.size() != n * static_cast<std::size_t>(channels_))
+        throw Error(detail::concat("visibility function: ", v_.size(), " values for ", n, " vertices of ",
+                                   channels_, " channels"));
+    if (withCounts_ && count_.size() != n)
+        throw Error(detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
+    std::size_t previousBegin = 0;
+    for (std::size_t layer = 1; layer < layerCount(); ++layer) {
+        const std::size_t b = layerBegin(layer);
+        if (b <= previousBegin || b >= n)
+            throw Error(detail::concat("visibility function: layer ", layer, " starts at vertex ", b,
+                                       ", outside (", previousBegin, ", ", n, ")"));
+        previousBegin = b;
+    }
+    std::size_t nextLayer = 1;
+    for (std::size_t i = 0; i < n; ++i) {
+        const float z = z_[i];
+        if (!std::isfinite(z)) throw Error(detail::concat("vertex ", i, ": depth ", z, " is not finite"));
+        if (z < 0.0f) throw Error(detail::concat("vertex ", i, ": depth ", z, " is negative"));
+        if (i > 0 && z < z_[i - 1])
+            throw Error(detail::concat("vertex ", i, ": depth ", z, " is less than the previous depth ", z_[i - 1]));
+        bool layerStart = (i == 0);
+        if (nextLayer < layerCount() && i == layerBegin(nextLayer)) {
+            layerStart = true;
+            ++nextLayer;
+        }
+        for (int c = 0; c < channels_; ++c) {
+            const float v = value(i, c);
+            if (!std::isfinite(v) || v < 0.0f || v > 1.0f)
+                throw Error(detail::concat("vertex ", i, " channel ", c, ": visibility ", v, " is outside [0, 1]"));
+            if (!layerStart && v > value(i - 1, c))
+                throw Error(detail::concat("vertex ", i, " channel ", c, ": visibility ", v,
+                                           " increases from the previous ", value(i - 1, c)));
+        }
+    }
+}
+
+bool VisibilityFunction::isMonochrome() const {
+    if (channels_ == 1) return true;
+    for (std::size_t i = 0; i < z_.size(); ++i) {
+        const float* v = values(i);
+        for (int c = 1; c < channels_; ++c)
+            if (v[c] != v[0]) return false;
+    }
+    return true;
+}
+
+VisibilityFunction VisibilityFunction::toMonochrome() const {
+    VisibilityFunction mono(1, withCounts_);
+    mono.reserve(size());
+    for (std::size_t layer = 0; layer < layerCount(); ++layer) {
+        if (layer > 0) mono.beginLayer();
+        for (std::size_t i = layerBegin(layer); i < layerEnd(layer); ++i) mono.append(z_[i], values(i), count(i));
+    }
+    return mono;
+}
+
+VisibilityCursor::VisibilityCursor(const VisibilityFunction& function) : function_(&function) {}
+
+std::size_t VisibilityCursor::locate(double z) {
+    const auto& zs = function_->z_;
+    const std::size_t end0 = function_->layerEnd(0);
+    std::size_t k = std::min(next_, end0);
+    while (k < end0 && static_cast<double>(zs[k]) <= z) {
+        ++k;
+        ++steps_;
+    }
+    while (k > 0 && static_cast<double>(zs[k - 1]) > z) {
+        --k;
+        ++steps_;
+    }
+    next_ = k;
+    return k;
+}
+
+double VisibilityCursor::evaluate(double z, int channel) {
+    const VisibilityFunction& f = *function_;
+    const std::size_t end0 = f.layerEnd(0);
+    if (f.layerCount() > 1 && z >= f.z_[end0 - 1]) return 0.0;
+    const std::size_t k = locate(z);
+    if (k == 0) return 1.0;
+    if (k == end0) return f.value(end0 - 1, channel);
+    return lerpSegment(f.z_[k - 1], f.value(k - 1, channel), f.z_[k], f.value(k, channel), z);
+}
+
+void VisibilityCursor::evaluate(double z, double* out) {
+    for (int c = 0; c < function_->channels(); ++c) out[c] = evaluate(z, c);
+}
+
+bool CollectingSink::push(float z, const double* values, std::uint32_t count) {
+    float v[kMaxChannels];
+    for (int c = 0; c < out_.channels(); ++c) v[c] = static_cast<float>(values[c]);
+    out_.append(z, v, count);
+    return true;
+}
+
+}  // namespace dsm
