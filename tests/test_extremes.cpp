@@ -1,0 +1,1 @@
+// Tests for the core; filled in below.
