@@ -63,29 +63,12 @@ void VisibilityFunction::clear() {
     layerBegin_.clear();
 }
 
-double VisibilityFunction::evaluateRange(std::size_t begin, std::size_t end, double z, int channel) const {
-    const auto first = z_.begin() + static_cast<std::ptrdiff_t>(begin);
-    const auto last = z_.begin() + static_cast<std::ptrdiff_t>(end);
-    const std::size_t k = static_cast<std::size_t>(
-        std::upper_bound(first, last, z, [](double q, float zk) { return q < zk; }) - z_.begin());
-    if (k == begin) return 1.0;
-    if (k == end) return value(end - 1, channel);
-    return lerpSegment(z_[k - 1], value(k - 1, channel), z_[k], value(k, channel), z);
-}
+double VisibilityFunction::evaluate(double z, int channel) const { return view().evaluate(z, channel); }
 
-double VisibilityFunction::evaluate(double z, int channel) const {
-    const std::size_t end0 = layerEnd(0);
-    if (layerCount() > 1 && z >= z_[end0 - 1]) return 0.0;
-    return evaluateRange(0, end0, z, channel);
-}
-
-void VisibilityFunction::evaluate(double z, double* out) const {
-    for (int c = 0; c < channels_; ++c) out[c] = evaluate(z, c);
-}
+void VisibilityFunction::evaluate(double z, double* out) const { view().evaluate(z, out); }
 
 double VisibilityFunction::evaluateLayer(std::size_t layer, double z, int channel) const {
-    if (layer >= layerCount()) return 1.0;
-    return evaluateRange(layerBegin(layer), layerEnd(layer), z, channel);
+    return view().evaluateLayer(layer, z, channel);
 }
 
 void VisibilityFunction::validate() const {
@@ -146,11 +129,50 @@ VisibilityFunction VisibilityFunction::toMonochrome() const {
     return mono;
 }
 
-VisibilityCursor::VisibilityCursor(const VisibilityFunction& function) : function_(&function) {}
+namespace {
+
+// V(z) on vertices [begin, end) of `f`: right-continuous, 1 before the first.
+double evaluateRange(const VisibilityView& f, std::size_t begin, std::size_t end, double z, int channel) {
+    const auto zs = f.depths();
+    const std::size_t k = static_cast<std::size_t>(
+        std::upper_bound(zs.begin() + static_cast<std::ptrdiff_t>(begin), zs.begin() + static_cast<std::ptrdiff_t>(end),
+                         z, [](double q, float zk) { return q < zk; }) -
+        zs.begin());
+    if (k == begin) return 1.0;
+    if (k == end) return f.value(end - 1, channel);
+    return lerpSegment(zs[k - 1], f.value(k - 1, channel), zs[k], f.value(k, channel), z);
+}
+
+}  // namespace
+
+double VisibilityView::evaluate(double z, int channel) const {
+    const std::size_t end0 = lightEnd();
+    if (layerCount() > 1 && z >= z_[end0 - 1]) return 0.0;
+    return evaluateRange(*this, 0, end0, z, channel);
+}
+
+void VisibilityView::evaluate(double z, double* out) const {
+    for (int c = 0; c < channels_; ++c) out[c] = evaluate(z, c);
+}
+
+double VisibilityView::evaluateLayer(std::size_t layer, double z, int channel) const {
+    if (layer >= layerCount()) return 1.0;
+    return evaluateRange(*this, layerBegin(layer), layerEnd(layer), z, channel);
+}
+
+VisibilityFunction VisibilityView::toFunction(bool withCounts) const {
+    VisibilityFunction f(channels_, withCounts && !count_.empty());
+    f.reserve(size());
+    for (std::size_t layer = 0; layer < layerCount(); ++layer) {
+        if (layer > 0) f.beginLayer();
+        for (std::size_t i = layerBegin(layer); i < layerEnd(layer); ++i) f.append(z_[i], values(i), count(i));
+    }
+    return f;
+}
 
 std::size_t VisibilityCursor::locate(double z) {
-    const auto& zs = function_->z_;
-    const std::size_t end0 = function_->layerEnd(0);
+    const auto zs = function_.depths();
+    const std::size_t end0 = function_.lightEnd();
     std::size_t k = std::min(next_, end0);
     while (k < end0 && static_cast<double>(zs[k]) <= z) {
         ++k;
@@ -165,17 +187,17 @@ std::size_t VisibilityCursor::locate(double z) {
 }
 
 double VisibilityCursor::evaluate(double z, int channel) {
-    const VisibilityFunction& f = *function_;
-    const std::size_t end0 = f.layerEnd(0);
-    if (f.layerCount() > 1 && z >= f.z_[end0 - 1]) return 0.0;
+    const VisibilityView& f = function_;
+    const std::size_t end0 = f.lightEnd();
+    if (f.layerCount() > 1 && z >= f.z(end0 - 1)) return 0.0;
     const std::size_t k = locate(z);
     if (k == 0) return 1.0;
     if (k == end0) return f.value(end0 - 1, channel);
-    return lerpSegment(f.z_[k - 1], f.value(k - 1, channel), f.z_[k], f.value(k, channel), z);
+    return lerpSegment(f.z(k - 1), f.value(k - 1, channel), f.z(k), f.value(k, channel), z);
 }
 
 void VisibilityCursor::evaluate(double z, double* out) {
-    for (int c = 0; c < function_->channels(); ++c) out[c] = evaluate(z, c);
+    for (int c = 0; c < function_.channels(); ++c) out[c] = evaluate(z, c);
 }
 
 bool CollectingSink::push(float z, const double* values, std::uint32_t count) {

@@ -12,6 +12,63 @@ namespace dsm {
 /// Largest channel count: a function is monochrome (1) or RGB (3).
 inline constexpr int kMaxChannels = 3;
 
+class VisibilityFunction;
+
+/// A read-only view of a visibility function whose arrays live elsewhere (a
+/// VisibilityFunction, or a pixel of a decoded tile). Same representation and
+/// the same evaluation rules as VisibilityFunction, which documents them. Cheap
+/// to copy; valid while the arrays it views are.
+class VisibilityView {
+public:
+    VisibilityView() = default;
+    /// `values` holds z.size() * channels floats, vertex-major; `counts` is
+    /// empty or holds one count per vertex; `layerStarts` holds the first
+    /// vertex of layers 1, 2, ... (empty for a single layer).
+    VisibilityView(std::span<const float> z, std::span<const float> values, std::span<const std::uint32_t> counts,
+                   int channels, std::span<const std::uint32_t> layerStarts = {})
+        : z_(z), v_(values), count_(counts), layerStarts_(layerStarts), channels_(channels) {}
+
+    int channels() const { return channels_; }
+    /// True when the viewed function carries counts (and has vertices).
+    bool hasCounts() const { return !count_.empty(); }
+    std::size_t size() const { return z_.size(); }
+    bool empty() const { return z_.empty(); }
+    float z(std::size_t i) const { return z_[i]; }
+    float value(std::size_t i, int channel = 0) const {
+        return v_[i * static_cast<std::size_t>(channels_) + static_cast<std::size_t>(channel)];
+    }
+    const float* values(std::size_t i) const { return v_.data() + i * static_cast<std::size_t>(channels_); }
+    std::uint32_t count(std::size_t i) const { return count_.empty() ? 0u : count_[i]; }
+    std::span<const float> depths() const { return z_; }
+    std::span<const float> allValues() const { return v_; }
+    std::span<const std::uint32_t> counts() const { return count_; }
+    std::span<const std::uint32_t> layerStarts() const { return layerStarts_; }
+
+    std::size_t layerCount() const { return layerStarts_.size() + 1; }
+    std::size_t layerBegin(std::size_t layer) const { return layer == 0 ? 0 : layerStarts_[layer - 1]; }
+    std::size_t layerEnd(std::size_t layer) const {
+        return layer + 1 < layerCount() ? layerStarts_[layer] : z_.size();
+    }
+    /// End of the light-centre function: vertices [0, lightEnd()) are layer 0.
+    std::size_t lightEnd() const { return layerEnd(0); }
+
+    /// Light-centre visibility at z (see VisibilityFunction::evaluate).
+    double evaluate(double z, int channel = 0) const;
+    void evaluate(double z, double* out) const;
+    /// Visibility of layer L alone (1 before its first vertex).
+    double evaluateLayer(std::size_t layer, double z, int channel = 0) const;
+
+    /// A copy that owns its data. `withCounts` false drops the counts.
+    VisibilityFunction toFunction(bool withCounts = true) const;
+
+private:
+    std::span<const float> z_;
+    std::span<const float> v_;
+    std::span<const std::uint32_t> count_;
+    std::span<const std::uint32_t> layerStarts_;
+    int channels_ = 1;
+};
+
 /// A visibility function V(z): the fraction of a light beam that reaches depth z.
 ///
 /// Representation
@@ -110,11 +167,13 @@ public:
     /// or accepts the loss of the other channels.
     VisibilityFunction toMonochrome() const;
 
+    /// A view of this function (valid until it is modified).
+    VisibilityView view() const { return VisibilityView(z_, v_, count_, channels_, layerBegin_); }
+    operator VisibilityView() const { return view(); }
+
     friend bool operator==(const VisibilityFunction&, const VisibilityFunction&) = default;
 
 private:
-    friend class VisibilityCursor;
-    double evaluateRange(std::size_t begin, std::size_t end, double z, int channel) const;
 
     int channels_;
     bool withCounts_;
@@ -131,7 +190,8 @@ private:
 /// outlive it and not change while it is used.
 class VisibilityCursor {
 public:
-    explicit VisibilityCursor(const VisibilityFunction& function);
+    explicit VisibilityCursor(const VisibilityView& function) : function_(function) {}
+    explicit VisibilityCursor(const VisibilityFunction& function) : function_(function.view()) {}
     double evaluate(double z, int channel = 0);
     void evaluate(double z, double* out);
     /// Number of vertices stepped over by the linear searches so far (for tests
@@ -140,7 +200,7 @@ public:
 
 private:
     std::size_t locate(double z);  // first vertex of layer 0 with z_k > z
-    const VisibilityFunction* function_;
+    VisibilityView function_;
     std::size_t next_ = 0;  // cached: first vertex with z_k > last query
     std::uint64_t steps_ = 0;
 };

@@ -1,0 +1,61 @@
+// A tile cache bounded by bytes, shared by any number of open deep shadow maps
+// and threads (Lokovic & Veach 2000, §5.4; in the spirit of Ptex's and
+// OpenImageIO's caches).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <memory>
+
+namespace dsm {
+
+/// Counters of a TileCache. Plain values, copied out by TileCache::stats().
+struct TileCacheStats {
+    std::uint64_t budgetBytes = 0;     ///< the byte budget the cache keeps to
+    std::uint64_t bytesInUse = 0;      ///< decoded tile bytes held by the cache now
+    std::uint64_t peakBytesInUse = 0;  ///< largest bytesInUse since creation or resetStats()
+    std::uint64_t tilesInUse = 0;      ///< tiles held by the cache now
+    std::uint64_t hits = 0;            ///< requests answered from the cache
+    std::uint64_t misses = 0;          ///< requests that had to read a tile
+    std::uint64_t tilesRead = 0;       ///< tiles read and decoded from files
+    std::uint64_t bytesRead = 0;       ///< stored (file) bytes read for those tiles
+    std::uint64_t evictions = 0;       ///< tiles dropped to stay within budget
+};
+
+/// Holds decoded tiles of any number of files, least recently used first out,
+/// so that the bytes it holds never exceed the budget by more than the one tile
+/// being added. Fully thread-safe. A tile handed out stays valid for as long
+/// as its holder keeps it, even if the cache evicts it meanwhile.
+///
+/// Create one with TileCache::create() and pass it to every map you open;
+/// maps opened without one share a process-wide cache (see defaultCache()).
+class TileCache {
+public:
+    /// A cache that keeps at most `budgetBytes` of decoded tiles (plus one tile).
+    static std::shared_ptr<TileCache> create(std::size_t budgetBytes);
+    /// The process-wide cache used when none is given: 256 MiB.
+    static std::shared_ptr<TileCache> defaultCache();
+
+    ~TileCache();
+    TileCache(const TileCache&) = delete;
+    TileCache& operator=(const TileCache&) = delete;
+
+    std::size_t budget() const;
+    /// Changes the budget; evicts at once if the cache holds more.
+    void setBudget(std::size_t budgetBytes);
+    TileCacheStats stats() const;
+    /// Zeroes the counters; peaks restart from the current use.
+    void resetStats();
+    /// Drops every tile the cache holds (tiles handed out stay valid).
+    void clear();
+
+    /// Internal interface used by the map reader (src/tile_cache_impl.h).
+    struct Impl;
+    Impl& impl() { return *impl_; }
+
+private:
+    explicit TileCache(std::size_t budgetBytes);
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dsm
