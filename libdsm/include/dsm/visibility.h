@@ -58,6 +58,9 @@ public:
     /// Visibility of layer L alone (1 before its first vertex).
     double evaluateLayer(std::size_t layer, double z, int channel = 0) const;
 
+    /// The invariants of VisibilityFunction::validate(), on the viewed arrays.
+    void validate() const;
+
     /// A copy that owns its data. `withCounts` false drops the counts.
     VisibilityFunction toFunction(bool withCounts = true) const;
 

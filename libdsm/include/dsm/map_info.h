@@ -1,0 +1,97 @@
+// What a deep shadow map file describes about itself: size, tiling, channels,
+// the light camera, the mip levels and their tolerances, metadata.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace dsm {
+
+/// How the light sees the scene. Light space: x right, y up, z forward along
+/// the view axis. Depth in a map is light-space z (world units when the
+/// world-to-light transform is rigid).
+enum class Projection : std::uint8_t { Perspective = 0, Orthographic = 1 };
+
+/// The pixel filter used to build a map (recorded for reference) or to filter
+/// lookups.
+enum class PixelFilter : std::uint8_t { Box = 0, Triangle = 1, Gaussian = 2 };
+
+/// The light camera of a map (the "shadow camera" of Lokovic & Veach §2).
+///
+/// Screen coordinates: perspective (sx, sy) = (x / z, y / z); orthographic
+/// (sx, sy) = (x, y). The screen window [xmin, xmax] x [ymin, ymax] maps onto the
+/// raster [0, width] x [0, height] with raster y pointing down:
+///   rx = (sx - xmin) / (xmax - xmin) * width,  ry = (ymax - sy) / (ymax - ymin) * height.
+/// Pixel (i, j) covers [i, i+1) x [j, j+1); its centre is (i + 0.5, j + 0.5).
+struct LightCamera {
+    Projection projection = Projection::Perspective;
+    /// Row-major 4x4 matrix M with light = M * (world, 1).
+    std::array<double, 16> worldToLight{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    /// xmin, xmax, ymin, ymax. For a perspective light, tan of the half angles
+    /// (the window at unit depth); for an orthographic light, light-space units.
+    std::array<double, 4> screenWindow{-1.0, 1.0, -1.0, 1.0};
+    /// Depth of the near plane: nothing nearer was sampled.
+    double nearPlane = 0.0;
+
+    /// World point to light space.
+    std::array<double, 3> worldToLightSpace(const std::array<double, 3>& world) const;
+    /// Light-space point to raster (rx, ry) and depth z. For a perspective
+    /// camera, points at z <= 0 have no raster position: returns false.
+    bool lightToRaster(const std::array<double, 3>& light, int width, int height, double& rx, double& ry,
+                       double& z) const;
+    /// Throws dsm::Error when a field is not finite or the window is empty.
+    void validate() const;
+
+    friend bool operator==(const LightCamera&, const LightCamera&) = default;
+};
+
+/// One mip level (Lokovic & Veach §5.3).
+struct LevelInfo {
+    std::uint32_t width = 0;
+    std::uint32_t height = 0;
+    std::uint32_t tilesX = 0;
+    std::uint32_t tilesY = 0;
+    /// The compression tolerance epsilon used for this level's functions.
+    double tolerance = 0.0;
+    /// Bound on |V - V_exact| for this level's functions against the exact
+    /// average of the full-resolution functions it summarises: the sum of the
+    /// tolerances of this level and every finer one.
+    double errorBound = 0.0;
+    std::uint64_t vertexCount = 0;
+    std::uint64_t nonEmptyPixels = 0;
+    /// Bytes the level's tiles take in the file.
+    std::uint64_t storedBytes = 0;
+};
+
+/// Everything a map's header and level table hold.
+struct MapInfo {
+    std::uint16_t versionMajor = 0;
+    std::uint16_t versionMinor = 0;
+    std::uint32_t width = 0;
+    std::uint32_t height = 0;
+    std::uint32_t tileSize = 0;
+    /// 1 (monochrome) or 3 (RGB); an RGB map may still store monochrome pixels.
+    int channels = 1;
+    /// Vertices carry sample counts (for MTSM ray tracing).
+    bool hasCounts = false;
+    /// Most layers any pixel may have (1 = ordinary deep shadow map).
+    int maxLayers = 1;
+    LightCamera camera;
+    PixelFilter filter = PixelFilter::Box;
+    /// Filter width in pixels used when the map was built.
+    double filterWidth = 1.0;
+    std::vector<LevelInfo> levels;
+    /// JSON text: build settings, scene, software.
+    std::string metadata = "{}";
+    std::uint64_t fileBytes = 0;
+};
+
+/// Size of mip level `level` of a width x height map: each level halves the
+/// previous one, rounding up, down to 1.
+std::uint32_t levelExtent(std::uint32_t fullExtent, unsigned level);
+/// Number of levels of a full pyramid down to 1 x 1.
+unsigned fullLevelCount(std::uint32_t width, std::uint32_t height);
+
+}  // namespace dsm

@@ -1,0 +1,88 @@
+// Reading .dsm files: lazy, validating, cached (format: spec/dsm-format.md).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+
+#include "dsm/map_info.h"
+#include "dsm/tile_cache.h"
+#include "dsm/visibility.h"
+
+namespace dsm {
+
+/// Limits for untrusted files, checked before anything is allocated.
+struct ReaderOptions {
+    std::uint32_t maxWidth = 1u << 17;
+    std::uint32_t maxHeight = 1u << 17;
+    std::uint32_t maxVerticesPerPixel = 1u << 24;
+    /// Largest decoded tile accepted, in bytes.
+    std::uint64_t maxTileBytes = 1ull << 30;
+    std::uint64_t maxMetadataBytes = 1ull << 24;
+    /// Cache for decoded tiles; null uses TileCache::defaultCache().
+    std::shared_ptr<TileCache> cache;
+};
+
+/// One pixel's function, kept alive with the tile that holds it.
+class PixelFunction {
+public:
+    PixelFunction() = default;
+    PixelFunction(std::shared_ptr<const void> tile, VisibilityView view) : tile_(std::move(tile)), view_(view) {}
+    const VisibilityView& view() const { return view_; }
+    const VisibilityView* operator->() const { return &view_; }
+
+private:
+    std::shared_ptr<const void> tile_;
+    VisibilityView view_;
+};
+
+/// Per-tile summary from the directory (no tile data is read).
+struct TileSummary {
+    std::uint64_t offset = 0;
+    std::uint32_t storedBytes = 0;
+    std::uint32_t rawBytes = 0;
+    std::uint32_t crc32 = 0;
+    std::uint32_t vertexCount = 0;
+    std::uint32_t nonEmptyPixels = 0;
+    float minZ = 0.0f;  ///< smallest vertex depth in the tile (0 for an empty tile)
+    float maxZ = 0.0f;  ///< largest vertex depth in the tile
+    bool empty() const { return storedBytes == 0; }
+};
+
+/// An open deep shadow map. open() reads and checks the header, level table,
+/// directories and metadata against the file size; tiles are read on demand
+/// through the cache. Thread-safe: any number of threads may read pixels at
+/// once. Every problem with the file throws dsm::Error naming the file and,
+/// where known, level, tile and pixel.
+class DeepShadowMap {
+public:
+    static std::shared_ptr<DeepShadowMap> open(const std::string& path, const ReaderOptions& options = {});
+    ~DeepShadowMap();
+    DeepShadowMap(const DeepShadowMap&) = delete;
+    DeepShadowMap& operator=(const DeepShadowMap&) = delete;
+
+    const MapInfo& info() const;
+    const std::string& path() const;
+    const TileCache& cache() const;
+
+    /// The function of pixel (x, y) of a level (0 = full resolution).
+    PixelFunction pixel(unsigned level, std::uint32_t x, std::uint32_t y) const;
+    /// Directory entry of tile (tx, ty) of a level.
+    TileSummary tile(unsigned level, std::uint32_t tx, std::uint32_t ty) const;
+
+    struct Impl;
+    const Impl& impl() const { return *impl_; }
+
+private:
+    DeepShadowMap();
+    std::unique_ptr<Impl> impl_;
+};
+
+/// Checks a whole file: the header and every directory (as open() does), then
+/// reads every tile of every level without the cache and checks its CRC-32,
+/// its layout, every function's invariants (depth order, value range,
+/// monotonicity, counts) and the directory's totals. Throws dsm::Error naming
+/// the file, level, tile and pixel of the first problem.
+void validate(const std::string& path, const ReaderOptions& options = {});
+
+}  // namespace dsm

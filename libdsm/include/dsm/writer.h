@@ -1,0 +1,81 @@
+// Streaming writer of .dsm files (format: spec/dsm-format.md).
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "dsm/map_info.h"
+#include "dsm/visibility.h"
+
+namespace dsm {
+
+struct WriterOptions {
+    std::uint32_t width = 0;
+    std::uint32_t height = 0;
+    /// Tile edge in pixels: a power of two from 2 to 4096.
+    std::uint32_t tileSize = 32;
+    /// 1 or 3. An RGB map may hold monochrome pixels (stored with one channel).
+    int channels = 1;
+    /// Store per-vertex sample counts. Pixels must then carry counts.
+    bool counts = false;
+    /// Most layers a pixel may have (1..255); > 1 for an MTSM.
+    int maxLayers = 1;
+    LightCamera camera;
+    PixelFilter filter = PixelFilter::Box;
+    double filterWidth = 1.0;
+    /// Tolerance epsilon the level-0 functions were compressed with (recorded).
+    double tolerance = 0.0;
+    /// Mip levels to write: 0 = a full pyramid down to 1 x 1, 1 = no mip-maps,
+    /// N = the first N levels (capped at the full count).
+    unsigned mipLevels = 0;
+    /// Each coarser level is recompressed with the previous tolerance times
+    /// this factor (Lokovic & Veach §5.3 halve it: total error <= 2 epsilon).
+    double levelToleranceFactor = 0.5;
+    /// zlib level 0..9; 0 stores tiles uncompressed.
+    int zlibLevel = 6;
+    /// JSON text stored in the file.
+    std::string metadata = "{}";
+};
+
+/// Writes a map tile by tile. Level-0 tiles may come in any order; each is
+/// written to disk as soon as it arrives, and coarser levels are built from
+/// each 2 x 2 block of tiles as soon as the block is complete (exact averaging
+/// by the sweep, then recompression). Memory holds only the partly built
+/// coarser tiles: about half a row of level-0 tiles in row order.
+///
+/// Output goes to a temporary file beside `path`, renamed to `path` by
+/// finish(). If finish() is not reached (an error, an exception, a crash) no
+/// file named `path` is created or replaced; the destructor removes the
+/// temporary file.
+class MapWriter {
+public:
+    /// Opens the temporary file. Throws dsm::Error for bad options or I/O.
+    MapWriter(const std::string& path, const WriterOptions& options);
+    ~MapWriter();
+    MapWriter(const MapWriter&) = delete;
+    MapWriter& operator=(const MapWriter&) = delete;
+
+    /// Tiles across and down at level 0.
+    std::uint32_t tilesX() const;
+    std::uint32_t tilesY() const;
+    /// Pixel size of level-0 tile (tx, ty), clipped at the image edge.
+    std::uint32_t tileWidth(std::uint32_t tx) const;
+    std::uint32_t tileHeight(std::uint32_t ty) const;
+
+    /// Level-0 tile (tx, ty): tileWidth(tx) * tileHeight(ty) functions in row
+    /// order. Each is validated; channels, counts and layers must fit the
+    /// options. Throws dsm::Error naming tile and pixel.
+    void writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const VisibilityFunction> pixels);
+
+    /// Completes the pyramid, writes directories and metadata, and renames the
+    /// file into place. Throws dsm::Error naming the first missing tile.
+    void finish();
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dsm

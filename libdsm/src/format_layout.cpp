@@ -1,0 +1,249 @@
+#include "format_layout.h"
+
+#include <bit>
+#include <cmath>
+#include <cstring>
+
+#include <zlib.h>
+
+#include "byte_io.h"
+#include "dsm/error.h"
+#include "text.h"
+
+namespace dsm::format {
+
+using detail::ByteReader;
+using detail::ByteWriter;
+using detail::concat;
+
+std::uint32_t crc32(const std::uint8_t* data, std::size_t size) {
+    uLong crc = ::crc32(0L, Z_NULL, 0);
+    while (size > 0) {
+        const uInt chunk = static_cast<uInt>(std::min<std::size_t>(size, 1u << 30));
+        crc = ::crc32(crc, data, chunk);
+        data += chunk;
+        size -= chunk;
+    }
+    return static_cast<std::uint32_t>(crc);
+}
+
+std::vector<std::uint8_t> encodeHeader(const Header& h) {
+    std::vector<std::uint8_t> out;
+    out.reserve(kHeaderSize);
+    ByteWriter w(out);
+    for (std::uint8_t b : kMagic) w.u8(b);
+    w.u16(h.versionMajor);
+    w.u16(h.versionMinor);
+    w.u32(kHeaderSize);
+    w.u32(h.requiredFlags);
+    w.u32(h.optionalFlags);
+    w.u32(h.width);
+    w.u32(h.height);
+    w.u32(h.tileSize);
+    w.u8(h.channels);
+    w.u8(h.maxLayers);
+    w.u8(h.filter);
+    w.u8(h.projection);
+    w.f64(h.filterWidth);
+    for (double m : h.worldToLight) w.f64(m);
+    for (double s : h.screenWindow) w.f64(s);
+    w.f64(h.nearPlane);
+    w.u32(h.levelCount);
+    w.u32(kLevelEntrySize);
+    w.u32(kTileEntrySize);
+    w.u32(0);  // header CRC, filled below
+    w.u64(h.levelTableOffset);
+    w.u64(h.metadataOffset);
+    w.u64(h.metadataSize);
+    w.u32(h.levelTableCrc);
+    w.u32(h.metadataCrc);
+    w.u64(h.fileSize);
+    const std::uint32_t crc = crc32(out.data(), out.size());
+    for (int i = 0; i < 4; ++i) out[kHeaderCrcOffset + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+    return out;
+}
+
+Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64_t fileSize,
+                    const ReaderOptions& limits, const std::string& where) {
+    auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    if (available < kMagic.size() || std::memcmp(data, kMagic.data(), kMagic.size()) != 0)
+        fail("not a deep shadow map (bad magic bytes)");
+    if (available < 16) fail(concat("file of ", fileSize, " bytes is too short for a header"));
+    ByteReader r(data, available);
+    r.skip(kMagic.size());
+    Header h;
+    h.versionMajor = r.u16();
+    h.versionMinor = r.u16();
+    if (h.versionMajor != kVersionMajor)
+        fail(concat("format version ", h.versionMajor, ".", h.versionMinor, " is not supported (this reader reads ",
+                    kVersionMajor, ".x)"));
+    h.headerSize = r.u32();
+    if (h.headerSize < kHeaderSize) fail(concat("header size ", h.headerSize, " is below the minimum ", kHeaderSize));
+    if (h.headerSize > fileSize || h.headerSize > available)
+        fail(concat("header size ", h.headerSize, " exceeds the file size ", fileSize));
+    {
+        std::vector<std::uint8_t> copy(data, data + h.headerSize);
+        const std::uint32_t stored = static_cast<std::uint32_t>(copy[kHeaderCrcOffset]) |
+                                     static_cast<std::uint32_t>(copy[kHeaderCrcOffset + 1]) << 8 |
+                                     static_cast<std::uint32_t>(copy[kHeaderCrcOffset + 2]) << 16 |
+                                     static_cast<std::uint32_t>(copy[kHeaderCrcOffset + 3]) << 24;
+        std::memset(copy.data() + kHeaderCrcOffset, 0, 4);
+        const std::uint32_t actual = crc32(copy.data(), copy.size());
+        if (stored != actual) fail(concat("header CRC-32 mismatch (stored ", stored, ", computed ", actual, ")"));
+    }
+    h.requiredFlags = r.u32();
+    h.optionalFlags = r.u32();
+    if (h.requiredFlags & ~kKnownRequiredFlags)
+        fail(concat("unknown required flags 0x", std::hex, h.requiredFlags & ~kKnownRequiredFlags));
+    h.width = r.u32();
+    h.height = r.u32();
+    h.tileSize = r.u32();
+    h.channels = r.u8();
+    h.maxLayers = r.u8();
+    h.filter = r.u8();
+    h.projection = r.u8();
+    h.filterWidth = r.f64();
+    for (double& m : h.worldToLight) m = r.f64();
+    for (double& s : h.screenWindow) s = r.f64();
+    h.nearPlane = r.f64();
+    h.levelCount = r.u32();
+    h.levelEntrySize = r.u32();
+    h.tileEntrySize = r.u32();
+    h.headerCrc = r.u32();
+    h.levelTableOffset = r.u64();
+    h.metadataOffset = r.u64();
+    h.metadataSize = r.u64();
+    h.levelTableCrc = r.u32();
+    h.metadataCrc = r.u32();
+    h.fileSize = r.u64();
+    if (!r.ok()) fail("header is truncated");
+
+    if (h.fileSize != fileSize)
+        fail(concat("file is ", fileSize, " bytes but its header records ", h.fileSize, " (truncated or extended)"));
+    if (h.width == 0 || h.height == 0) fail(concat("image size ", h.width, "x", h.height, " is empty"));
+    if (h.width > limits.maxWidth || h.height > limits.maxHeight)
+        fail(concat("image size ", h.width, "x", h.height, " exceeds the reader's limit ", limits.maxWidth, "x",
+                    limits.maxHeight));
+    if (h.tileSize < kMinTileSize || h.tileSize > kMaxTileSize || !std::has_single_bit(h.tileSize))
+        fail(concat("tile size ", h.tileSize, " is not a power of two from ", kMinTileSize, " to ", kMaxTileSize));
+    if (h.channels != 1 && h.channels != 3) fail(concat("channel count ", int(h.channels), " is not 1 or 3"));
+    if (h.maxLayers < 1) fail("layer count 0 (must be at least 1)");
+    if (((h.requiredFlags & kRequiredHasLayers) != 0) != (h.maxLayers > 1))
+        fail(concat("layer flag does not match the layer count ", int(h.maxLayers)));
+    if (h.filter > 2) fail(concat("unknown pixel filter ", int(h.filter)));
+    if (h.projection > 1) fail(concat("unknown projection ", int(h.projection)));
+    if (!std::isfinite(h.filterWidth) || h.filterWidth < 0.0) fail(concat("filter width ", h.filterWidth, " is invalid"));
+    if (h.levelCount < 1 || h.levelCount > fullLevelCount(h.width, h.height))
+        fail(concat("level count ", h.levelCount, " is not in [1, ", fullLevelCount(h.width, h.height), "]"));
+    if (h.levelEntrySize < kLevelEntrySize || h.levelEntrySize > (1u << 16))
+        fail(concat("level entry size ", h.levelEntrySize, " is invalid"));
+    if (h.tileEntrySize < kTileEntrySize || h.tileEntrySize > (1u << 16))
+        fail(concat("tile entry size ", h.tileEntrySize, " is invalid"));
+    const std::uint64_t levelTableBytes = std::uint64_t(h.levelCount) * h.levelEntrySize;
+    if (h.levelTableOffset < h.headerSize || h.levelTableOffset > fileSize ||
+        levelTableBytes > fileSize - h.levelTableOffset)
+        fail(concat("level table at ", h.levelTableOffset, " (", levelTableBytes, " bytes) does not fit in the file"));
+    if (h.metadataSize > limits.maxMetadataBytes)
+        fail(concat("metadata of ", h.metadataSize, " bytes exceeds the reader's limit ", limits.maxMetadataBytes));
+    if (h.metadataOffset < h.headerSize || h.metadataOffset > fileSize || h.metadataSize > fileSize - h.metadataOffset)
+        fail(concat("metadata at ", h.metadataOffset, " (", h.metadataSize, " bytes) does not fit in the file"));
+    return h;
+}
+
+void encodeLevelEntry(std::vector<std::uint8_t>& out, const LevelEntry& e) {
+    ByteWriter w(out);
+    w.u32(e.info.width);
+    w.u32(e.info.height);
+    w.u32(e.info.tilesX);
+    w.u32(e.info.tilesY);
+    w.f64(e.info.tolerance);
+    w.f64(e.info.errorBound);
+    w.u64(e.directoryOffset);
+    w.u64(e.info.vertexCount);
+    w.u64(e.info.nonEmptyPixels);
+    w.u64(e.info.storedBytes);
+    w.u32(e.directoryCrc);
+    w.u32(0);
+}
+
+LevelEntry decodeLevelEntry(const std::uint8_t* data) {
+    ByteReader r(data, kLevelEntrySize);
+    LevelEntry e;
+    e.info.width = r.u32();
+    e.info.height = r.u32();
+    e.info.tilesX = r.u32();
+    e.info.tilesY = r.u32();
+    e.info.tolerance = r.f64();
+    e.info.errorBound = r.f64();
+    e.directoryOffset = r.u64();
+    e.info.vertexCount = r.u64();
+    e.info.nonEmptyPixels = r.u64();
+    e.info.storedBytes = r.u64();
+    e.directoryCrc = r.u32();
+    return e;
+}
+
+void encodeTileEntry(std::vector<std::uint8_t>& out, const TileSummary& t) {
+    ByteWriter w(out);
+    w.u64(t.offset);
+    w.u32(t.storedBytes);
+    w.u32(t.rawBytes);
+    w.u32(t.crc32);
+    w.u32(t.vertexCount);
+    w.f32(t.minZ);
+    w.f32(t.maxZ);
+    w.u32(t.nonEmptyPixels);
+    w.u32(0);
+}
+
+TileSummary decodeTileEntry(const std::uint8_t* data) {
+    ByteReader r(data, kTileEntrySize);
+    TileSummary t;
+    t.offset = r.u64();
+    t.storedBytes = r.u32();
+    t.rawBytes = r.u32();
+    t.crc32 = r.u32();
+    t.vertexCount = r.u32();
+    t.minZ = r.f32();
+    t.maxZ = r.f32();
+    t.nonEmptyPixels = r.u32();
+    return t;
+}
+
+Header headerFromInfo(const MapInfo& info) {
+    Header h;
+    h.width = info.width;
+    h.height = info.height;
+    h.tileSize = info.tileSize;
+    h.channels = static_cast<std::uint8_t>(info.channels);
+    h.maxLayers = static_cast<std::uint8_t>(info.maxLayers);
+    h.requiredFlags = (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u);
+    h.filter = static_cast<std::uint8_t>(info.filter);
+    h.projection = static_cast<std::uint8_t>(info.camera.projection);
+    h.filterWidth = info.filterWidth;
+    h.worldToLight = info.camera.worldToLight;
+    h.screenWindow = info.camera.screenWindow;
+    h.nearPlane = info.camera.nearPlane;
+    h.levelCount = static_cast<std::uint32_t>(info.levels.size());
+    return h;
+}
+
+void infoFromHeader(const Header& h, MapInfo& info) {
+    info.versionMajor = h.versionMajor;
+    info.versionMinor = h.versionMinor;
+    info.width = h.width;
+    info.height = h.height;
+    info.tileSize = h.tileSize;
+    info.channels = h.channels;
+    info.hasCounts = (h.requiredFlags & kRequiredHasCounts) != 0;
+    info.maxLayers = h.maxLayers;
+    info.filter = static_cast<PixelFilter>(h.filter);
+    info.filterWidth = h.filterWidth;
+    info.camera.projection = static_cast<Projection>(h.projection);
+    info.camera.worldToLight = h.worldToLight;
+    info.camera.screenWindow = h.screenWindow;
+    info.camera.nearPlane = h.nearPlane;
+    info.fileBytes = h.fileSize;
+}
+
+}  // namespace dsm::format

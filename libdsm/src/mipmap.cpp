@@ -1,0 +1,52 @@
+#include "mipmap.h"
+
+#include <algorithm>
+#include <vector>
+
+#include "dsm/compressor.h"
+#include "dsm/sweep.h"
+
+namespace dsm {
+
+VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bool withCounts) {
+    VisibilityFunction out(channels, withCounts);
+    const std::size_t end = f.lightEnd();
+    out.reserve(end + 1);
+    float v[kMaxChannels];
+    for (std::size_t i = 0; i < end; ++i) {
+        for (int c = 0; c < channels; ++c) v[c] = f.value(i, std::min(c, f.channels() - 1));
+        out.append(f.z(i), v, f.count(i));
+    }
+    if (f.layerCount() > 1 && end > 0) {
+        bool allZero = true;
+        for (int c = 0; c < channels; ++c) allZero = allZero && out.value(end - 1, c) == 0.0f;
+        if (!allZero) {
+            std::fill(v, v + channels, 0.0f);
+            out.append(f.z(end - 1), v, 0);
+        }
+    }
+    return out;
+}
+
+VisibilityFunction averageFunctions(std::span<const VisibilityView> children, double tolerance, bool withCounts) {
+    int channels = 1;
+    bool anyVertices = false;
+    for (const VisibilityView& c : children) {
+        channels = std::max(channels, c.channels());
+        anyVertices = anyVertices || !c.empty();
+    }
+    if (!anyVertices) return VisibilityFunction(1, withCounts);
+    std::vector<VisibilityFunction> inputs;
+    inputs.reserve(children.size());
+    for (const VisibilityView& c : children) inputs.push_back(lightCentreFunction(c, channels, withCounts));
+    const std::vector<double> weights(children.size(), 1.0);
+    CompressorOptions options;
+    options.tolerance = tolerance;
+    options.channels = channels;
+    options.keepCounts = withCounts;
+    Compressor compressor(options);
+    sweep(inputs, weights, channels, compressor);
+    return compressor.finish();
+}
+
+}  // namespace dsm

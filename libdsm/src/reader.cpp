@@ -1,0 +1,226 @@
+#include "dsm/reader.h"
+
+#include <cerrno>
+#include <cmath>
+#include <cstring>
+#include <limits>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "dsm/error.h"
+#include "format_layout.h"
+#include "text.h"
+#include "tile_cache_impl.h"
+#include "tile_codec.h"
+
+namespace dsm {
+
+using detail::concat;
+
+struct DeepShadowMap::Impl {
+    std::string path;
+    int fd = -1;
+    ReaderOptions options;
+    MapInfo info;
+    std::vector<std::vector<TileSummary>> directories;
+    std::shared_ptr<TileCache> cache;
+    std::uint64_t fileId = 0;
+
+    ~Impl() {
+        if (cache && fileId) cache->impl().forgetFile(fileId);
+        if (fd >= 0) ::close(fd);
+    }
+
+    std::string where() const { return concat("'", path, "'"); }
+    std::string tileWhere(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
+        return concat(where(), " level ", level, " tile ", tx, ",", ty);
+    }
+
+    void readAt(std::uint64_t offset, std::uint8_t* out, std::size_t size, const std::string& what) const {
+        std::size_t done = 0;
+        while (done < size) {
+            const ssize_t n = ::pread(fd, out + done, size - done, static_cast<off_t>(offset + done));
+            if (n < 0 && errno == EINTR) continue;
+            if (n < 0) throw Error(concat(what, ": read failed: ", std::strerror(errno)));
+            if (n == 0) throw Error(concat(what, ": unexpected end of file"));
+            done += static_cast<std::size_t>(n);
+        }
+    }
+
+    format::TileLayout layout() const { return {info.channels, info.hasCounts, info.maxLayers}; }
+
+    std::uint32_t tileExtent(std::uint32_t levelExtent, std::uint32_t t) const {
+        return std::min(info.tileSize, levelExtent - t * info.tileSize);
+    }
+
+    // Reads and decodes one tile (no cache).
+    LoadedTile loadTile(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
+        const LevelInfo& L = info.levels[level];
+        const TileSummary& t = directories[level][std::size_t(ty) * L.tilesX + tx];
+        const std::string where = tileWhere(level, tx, ty);
+        std::vector<std::uint8_t> stored(t.storedBytes);
+        if (!t.empty()) readAt(t.offset, stored.data(), stored.size(), where);
+        auto tile = std::make_shared<format::DecodedTile>(
+            format::decodeTile(stored, t, tileExtent(L.width, tx), tileExtent(L.height, ty), layout(), options, where,
+                               tx * info.tileSize, ty * info.tileSize));
+        LoadedTile loaded;
+        loaded.memoryBytes = tile->memoryBytes();
+        loaded.fileBytes = t.storedBytes;
+        loaded.data = std::move(tile);
+        return loaded;
+    }
+
+    void openFile(const std::string& p, const ReaderOptions& o);
+};
+
+void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o) {
+    path = p;
+    options = o;
+    fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd < 0) throw Error(concat(where(), ": cannot open: ", std::strerror(errno)));
+    struct stat st {};
+    if (::fstat(fd, &st) != 0) throw Error(concat(where(), ": cannot stat: ", std::strerror(errno)));
+    if (!S_ISREG(st.st_mode)) throw Error(concat(where(), ": not a regular file"));
+    const std::uint64_t fileSize = static_cast<std::uint64_t>(st.st_size);
+
+    // Header: the fixed part first, then all of it if a newer minor version
+    // wrote a longer one (the fields we do not know are skipped).
+    std::vector<std::uint8_t> head(std::min<std::uint64_t>(fileSize, format::kHeaderSize));
+    readAt(0, head.data(), head.size(), where());
+    if (head.size() >= 16) {
+        const std::uint32_t declared = static_cast<std::uint32_t>(head[12]) | static_cast<std::uint32_t>(head[13]) << 8 |
+                                       static_cast<std::uint32_t>(head[14]) << 16 |
+                                       static_cast<std::uint32_t>(head[15]) << 24;
+        if (declared > head.size() && declared <= fileSize && declared <= (1u << 20)) {
+            head.resize(declared);
+            readAt(0, head.data(), head.size(), where());
+        }
+    }
+    const format::Header h = format::decodeHeader(head.data(), head.size(), fileSize, options, where());
+    format::infoFromHeader(h, info);
+    try {
+        info.camera.validate();
+    } catch (const Error& e) {
+        throw Error(concat(where(), ": ", e.what()));
+    }
+
+    // Level table.
+    std::vector<std::uint8_t> table(std::size_t(h.levelCount) * h.levelEntrySize);
+    readAt(h.levelTableOffset, table.data(), table.size(), where());
+    if (format::crc32(table.data(), table.size()) != h.levelTableCrc)
+        throw Error(concat(where(), ": level table CRC-32 mismatch"));
+    for (unsigned l = 0; l < h.levelCount; ++l) {
+        const format::LevelEntry e = format::decodeLevelEntry(table.data() + std::size_t(l) * h.levelEntrySize);
+        const std::string lw = concat(where(), " level ", l);
+        const LevelInfo& L = e.info;
+        if (L.width != levelExtent(info.width, l) || L.height != levelExtent(info.height, l))
+            throw Error(concat(lw, ": size ", L.width, "x", L.height, " does not halve the level above"));
+        if (L.tilesX != (L.width + info.tileSize - 1) / info.tileSize ||
+            L.tilesY != (L.height + info.tileSize - 1) / info.tileSize)
+            throw Error(concat(lw, ": tile counts ", L.tilesX, "x", L.tilesY, " do not match its size"));
+        if (!std::isfinite(L.tolerance) || L.tolerance < 0.0 || !std::isfinite(L.errorBound) || L.errorBound < 0.0)
+            throw Error(concat(lw, ": tolerance ", L.tolerance, " or error bound ", L.errorBound, " is invalid"));
+        const std::uint64_t tiles = std::uint64_t(L.tilesX) * L.tilesY;
+        const std::uint64_t bytes = tiles * h.tileEntrySize;
+        if (e.directoryOffset < h.headerSize || e.directoryOffset > fileSize || bytes > fileSize - e.directoryOffset)
+            throw Error(concat(lw, ": tile directory at ", e.directoryOffset, " (", bytes, " bytes) does not fit"));
+        std::vector<std::uint8_t> dir(bytes);
+        readAt(e.directoryOffset, dir.data(), dir.size(), lw);
+        if (format::crc32(dir.data(), dir.size()) != e.directoryCrc)
+            throw Error(concat(lw, ": tile directory CRC-32 mismatch"));
+        std::vector<TileSummary> tilesOfLevel(tiles);
+        std::uint64_t vertices = 0, nonEmpty = 0, stored = 0;
+        for (std::uint64_t i = 0; i < tiles; ++i) {
+            TileSummary t = format::decodeTileEntry(dir.data() + i * h.tileEntrySize);
+            const std::uint32_t tx = static_cast<std::uint32_t>(i % L.tilesX), ty = static_cast<std::uint32_t>(i / L.tilesX);
+            const std::string tw = tileWhere(l, tx, ty);
+            const std::uint64_t pixels = std::uint64_t(tileExtent(L.width, tx)) * tileExtent(L.height, ty);
+            if (t.empty()) {
+                if (t.rawBytes != 0 || t.vertexCount != 0 || t.nonEmptyPixels != 0 || t.offset != 0)
+                    throw Error(concat(tw, ": empty tile with non-zero directory fields"));
+            } else {
+                if (t.offset < h.headerSize || t.offset > fileSize || t.storedBytes > fileSize - t.offset)
+                    throw Error(concat(tw, ": data at ", t.offset, " (", t.storedBytes, " bytes) does not fit in the file"));
+                if (t.rawBytes < t.storedBytes) throw Error(concat(tw, ": raw size below stored size"));
+                if (t.rawBytes > options.maxTileBytes)
+                    throw Error(concat(tw, ": tile of ", t.rawBytes, " bytes exceeds the reader's limit ",
+                                       options.maxTileBytes));
+                if (t.vertexCount == 0 || t.vertexCount > pixels * options.maxVerticesPerPixel)
+                    throw Error(concat(tw, ": vertex count ", t.vertexCount, " is invalid for ", pixels, " pixels"));
+                if (t.nonEmptyPixels == 0 || t.nonEmptyPixels > pixels)
+                    throw Error(concat(tw, ": non-empty pixel count ", t.nonEmptyPixels, " is invalid"));
+                if (!std::isfinite(t.minZ) || !std::isfinite(t.maxZ) || t.minZ < 0.0f || t.minZ > t.maxZ)
+                    throw Error(concat(tw, ": depth range [", t.minZ, ", ", t.maxZ, "] is invalid"));
+            }
+            vertices += t.vertexCount;
+            nonEmpty += t.nonEmptyPixels;
+            stored += t.storedBytes;
+            tilesOfLevel[i] = t;
+        }
+        if (vertices != L.vertexCount || nonEmpty != L.nonEmptyPixels || stored != L.storedBytes)
+            throw Error(concat(lw, ": level totals do not match its tile directory"));
+        info.levels.push_back(L);
+        directories.push_back(std::move(tilesOfLevel));
+    }
+
+    std::string metadata(h.metadataSize, '\0');
+    readAt(h.metadataOffset, reinterpret_cast<std::uint8_t*>(metadata.data()), metadata.size(), where());
+    if (format::crc32(reinterpret_cast<const std::uint8_t*>(metadata.data()), metadata.size()) != h.metadataCrc)
+        throw Error(concat(where(), ": metadata CRC-32 mismatch"));
+    info.metadata = std::move(metadata);
+
+    cache = options.cache ? options.cache : TileCache::defaultCache();
+    fileId = cache->impl().newFileId();
+}
+
+DeepShadowMap::DeepShadowMap() : impl_(std::make_unique<Impl>()) {}
+DeepShadowMap::~DeepShadowMap() = default;
+
+std::shared_ptr<DeepShadowMap> DeepShadowMap::open(const std::string& path, const ReaderOptions& options) {
+    std::shared_ptr<DeepShadowMap> map(new DeepShadowMap());
+    map->impl_->openFile(path, options);
+    return map;
+}
+
+const MapInfo& DeepShadowMap::info() const { return impl_->info; }
+const std::string& DeepShadowMap::path() const { return impl_->path; }
+const TileCache& DeepShadowMap::cache() const { return *impl_->cache; }
+
+PixelFunction DeepShadowMap::pixel(unsigned level, std::uint32_t x, std::uint32_t y) const {
+    const Impl& s = *impl_;
+    if (level >= s.info.levels.size())
+        throw Error(concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
+    const LevelInfo& L = s.info.levels[level];
+    if (x >= L.width || y >= L.height)
+        throw Error(concat(s.where(), " level ", level, ": pixel ", x, ",", y, " is outside ", L.width, "x", L.height));
+    const std::uint32_t tx = x / s.info.tileSize, ty = y / s.info.tileSize;
+    const TileKey key{s.fileId, level, ty * L.tilesX + tx};
+    auto tile = s.cache->impl().get<format::DecodedTile>(key, [&] { return s.loadTile(level, tx, ty); });
+    const std::uint32_t w = s.tileExtent(L.width, tx);
+    const VisibilityView view = tile->pixel(std::size_t(y - ty * s.info.tileSize) * w + (x - tx * s.info.tileSize));
+    return PixelFunction(std::move(tile), view);
+}
+
+TileSummary DeepShadowMap::tile(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
+    const Impl& s = *impl_;
+    if (level >= s.info.levels.size())
+        throw Error(concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
+    const LevelInfo& L = s.info.levels[level];
+    if (tx >= L.tilesX || ty >= L.tilesY)
+        throw Error(concat(s.where(), " level ", level, ": tile ", tx, ",", ty, " is outside ", L.tilesX, "x", L.tilesY));
+    return s.directories[level][std::size_t(ty) * L.tilesX + tx];
+}
+
+void validate(const std::string& path, const ReaderOptions& options) {
+    ReaderOptions uncached = options;
+    uncached.cache = TileCache::create(0);
+    const auto map = DeepShadowMap::open(path, uncached);
+    const auto& s = map->impl();
+    for (unsigned l = 0; l < s.info.levels.size(); ++l)
+        for (std::uint32_t ty = 0; ty < s.info.levels[l].tilesY; ++ty)
+            for (std::uint32_t tx = 0; tx < s.info.levels[l].tilesX; ++tx) s.loadTile(l, tx, ty);
+}
+
+}  // namespace dsm

@@ -1,0 +1,295 @@
+#include "dsm/writer.h"
+
+#include <bit>
+#include <cerrno>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <map>
+#include <vector>
+
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include "dsm/error.h"
+#include "format_layout.h"
+#include "mipmap.h"
+#include "text.h"
+#include "tile_codec.h"
+
+namespace dsm {
+
+using detail::concat;
+
+namespace {
+
+// Rounding of double values to the stored float32 (see compressor.h).
+constexpr double kStoreRounding = 0x1p-25;
+
+struct Level {
+    LevelInfo info;
+    std::vector<TileSummary> directory;
+    std::vector<bool> written;
+};
+
+// A tile of a coarser level being filled from its (up to 4) children.
+struct PendingTile {
+    std::vector<VisibilityFunction> pixels;
+    unsigned childrenReceived = 0;
+};
+
+}  // namespace
+
+struct MapWriter::Impl {
+    std::string path;
+    std::string temporaryPath;
+    WriterOptions options;
+    std::FILE* file = nullptr;
+    std::uint64_t offset = 0;
+    std::vector<Level> levels;
+    std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
+    bool finished = false;
+
+    std::string where() const { return concat("'", path, "'"); }
+
+    void writeBytes(const std::uint8_t* data, std::size_t size) {
+        if (size > 0 && std::fwrite(data, 1, size, file) != size)
+            throw Error(concat(where(), ": write failed: ", std::strerror(errno)));
+        offset += size;
+    }
+
+    std::uint32_t tileExtent(std::uint32_t levelExtent, std::uint32_t t) const {
+        return std::min(options.tileSize, levelExtent - t * options.tileSize);
+    }
+
+    void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>& pixels) {
+        Level& L = levels[level];
+        const std::uint32_t index = ty * L.info.tilesX + tx;
+        const format::TileLayout layout{options.channels, options.counts, options.maxLayers};
+        format::EncodedTile encoded = format::encodeTile(pixels, layout, options.zlibLevel);
+        if (!encoded.stored.empty()) {
+            encoded.summary.offset = offset;
+            writeBytes(encoded.stored.data(), encoded.stored.size());
+        }
+        L.directory[index] = encoded.summary;
+        L.written[index] = true;
+        L.info.vertexCount += encoded.summary.vertexCount;
+        L.info.nonEmptyPixels += encoded.summary.nonEmptyPixels;
+        L.info.storedBytes += encoded.summary.storedBytes;
+        if (level + 1 < levels.size()) downsample(level, tx, ty, pixels);
+    }
+
+    // Adds the coarser pixels covered by tile (tx, ty) of `level` to the parent
+    // tile, and writes the parent once all its children have arrived. With an
+    // even tile size each coarser pixel's 2 x 2 children lie in one tile.
+    void downsample(unsigned level, std::uint32_t tx, std::uint32_t ty, const std::vector<VisibilityFunction>& pixels) {
+        const Level& child = levels[level];
+        const Level& parent = levels[level + 1];
+        const std::uint32_t T = options.tileSize;
+        const std::uint32_t ptx = tx / 2, pty = ty / 2;
+        const std::uint32_t parentIndex = pty * parent.info.tilesX + ptx;
+        const std::uint32_t pw = tileExtent(parent.info.width, ptx), ph = tileExtent(parent.info.height, pty);
+        PendingTile& p = pending[level + 1][parentIndex];
+        if (p.pixels.empty()) p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
+
+        const std::uint32_t cw = tileExtent(child.info.width, tx);
+        const std::uint32_t x0 = tx * T, y0 = ty * T;  // child tile origin (child level pixels)
+        const std::uint32_t ch = tileExtent(child.info.height, ty);
+        const double tolerance = parent.info.tolerance;
+        std::vector<VisibilityView> block;
+        for (std::uint32_t py = y0 / 2; py < (y0 + ch + 1) / 2; ++py) {
+            for (std::uint32_t px = x0 / 2; px < (x0 + cw + 1) / 2; ++px) {
+                block.clear();
+                for (std::uint32_t dy = 0; dy < 2; ++dy)
+                    for (std::uint32_t dx = 0; dx < 2; ++dx) {
+                        const std::uint32_t cx = 2 * px + dx, cy = 2 * py + dy;
+                        if (cx < x0 + cw && cy < y0 + ch)
+                            block.push_back(pixels[std::size_t(cy - y0) * cw + (cx - x0)].view());
+                    }
+                p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)] =
+                    averageFunctions(block, tolerance, options.counts);
+            }
+        }
+        const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *
+                                       (std::min(2 * pty + 2, child.info.tilesY) - 2 * pty);
+        if (++p.childrenReceived == expected) {
+            std::vector<VisibilityFunction> done = std::move(p.pixels);
+            pending[level + 1].erase(parentIndex);
+            acceptTile(level + 1, ptx, pty, done);
+        }
+    }
+};
+
+MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : impl_(std::make_unique<Impl>()) {
+    Impl& s = *impl_;
+    s.path = path;
+    s.options = options;
+    const std::string where = s.where();
+    auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    if (options.width == 0 || options.height == 0 || options.width > (1u << 17) || options.height > (1u << 17))
+        fail(concat("image size ", options.width, "x", options.height, " is not in [1, 131072]"));
+    if (options.tileSize < format::kMinTileSize || options.tileSize > format::kMaxTileSize ||
+        !std::has_single_bit(options.tileSize))
+        fail(concat("tile size ", options.tileSize, " is not a power of two from 2 to 4096"));
+    if (options.channels != 1 && options.channels != 3) fail(concat("channel count ", options.channels, " is not 1 or 3"));
+    if (options.maxLayers < 1 || options.maxLayers > 255) fail(concat("layer count ", options.maxLayers, " is not in [1, 255]"));
+    if (!std::isfinite(options.tolerance) || options.tolerance < 0.0)
+        fail(concat("tolerance ", options.tolerance, " is not a finite value >= 0"));
+    if (!std::isfinite(options.levelToleranceFactor) || options.levelToleranceFactor <= 0.0)
+        fail(concat("level tolerance factor ", options.levelToleranceFactor, " is not a finite value > 0"));
+    if (options.zlibLevel < 0 || options.zlibLevel > 9) fail(concat("zlib level ", options.zlibLevel, " is not in [0, 9]"));
+    if (!std::isfinite(options.filterWidth) || options.filterWidth < 0.0)
+        fail(concat("filter width ", options.filterWidth, " is not a finite value >= 0"));
+    if (static_cast<unsigned>(options.filter) > 2) fail("unknown pixel filter");
+    try {
+        options.camera.validate();
+    } catch (const Error& e) {
+        fail(e.what());
+    }
+
+    const unsigned full = fullLevelCount(options.width, options.height);
+    const unsigned count = options.mipLevels == 0 ? full : std::min(options.mipLevels, full);
+    double tolerance = options.tolerance, bound = 0.0;
+    for (unsigned l = 0; l < count; ++l) {
+        Level L;
+        L.info.width = levelExtent(options.width, l);
+        L.info.height = levelExtent(options.height, l);
+        L.info.tilesX = (L.info.width + options.tileSize - 1) / options.tileSize;
+        L.info.tilesY = (L.info.height + options.tileSize - 1) / options.tileSize;
+        L.info.tolerance = tolerance;
+        bound += std::max(tolerance, kStoreRounding);
+        L.info.errorBound = bound;
+        L.directory.resize(std::size_t(L.info.tilesX) * L.info.tilesY);
+        L.written.assign(L.directory.size(), false);
+        s.levels.push_back(std::move(L));
+        tolerance *= options.levelToleranceFactor;
+    }
+    s.pending.resize(count);
+
+    const std::filesystem::path target(path);
+    std::string pattern = (target.has_parent_path() ? target.parent_path() / ("." + target.filename().string())
+                                                    : std::filesystem::path("." + target.filename().string()))
+                              .string() +
+                          ".tmp-XXXXXX";
+    std::vector<char> name(pattern.begin(), pattern.end());
+    name.push_back('\0');
+    const int fd = ::mkstemp(name.data());
+    if (fd < 0) fail(concat("cannot create a temporary file beside it: ", std::strerror(errno)));
+    s.temporaryPath = name.data();
+    ::fchmod(fd, 0644);  // mkstemp creates 0600; a map is meant to be shared like any image
+    s.file = ::fdopen(fd, "wb");
+    if (!s.file) {
+        ::close(fd);
+        std::remove(s.temporaryPath.c_str());
+        fail(concat("cannot open the temporary file: ", std::strerror(errno)));
+    }
+    const std::vector<std::uint8_t> placeholder(format::kHeaderSize, 0);
+    s.writeBytes(placeholder.data(), placeholder.size());
+}
+
+MapWriter::~MapWriter() {
+    if (impl_ && !impl_->finished) {
+        if (impl_->file) std::fclose(impl_->file);
+        std::remove(impl_->temporaryPath.c_str());
+    }
+}
+
+std::uint32_t MapWriter::tilesX() const { return impl_->levels[0].info.tilesX; }
+std::uint32_t MapWriter::tilesY() const { return impl_->levels[0].info.tilesY; }
+std::uint32_t MapWriter::tileWidth(std::uint32_t tx) const {
+    return impl_->tileExtent(impl_->levels[0].info.width, tx);
+}
+std::uint32_t MapWriter::tileHeight(std::uint32_t ty) const {
+    return impl_->tileExtent(impl_->levels[0].info.height, ty);
+}
+
+void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const VisibilityFunction> pixels) {
+    Impl& s = *impl_;
+    const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
+    if (s.finished) throw Error(concat(where, ": the file is already finished"));
+    if (tx >= tilesX() || ty >= tilesY())
+        throw Error(concat(where, ": outside the ", tilesX(), "x", tilesY(), " tiles of the map"));
+    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx]) throw Error(concat(where, ": written twice"));
+    const std::uint32_t w = tileWidth(tx), h = tileHeight(ty);
+    if (pixels.size() != std::size_t(w) * h)
+        throw Error(concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
+    for (std::size_t p = 0; p < pixels.size(); ++p) {
+        const VisibilityFunction& f = pixels[p];
+        const std::string pixelWhere =
+            concat(where, " pixel ", tx * s.options.tileSize + p % w, ",", ty * s.options.tileSize + p / w, ": ");
+        if (f.channels() > s.options.channels)
+            throw Error(concat(pixelWhere, "RGB function in a monochrome map"));
+        if (s.options.counts && !f.hasCounts() && !f.empty())
+            throw Error(concat(pixelWhere, "the map stores sample counts but the function has none"));
+        if (static_cast<int>(f.layerCount()) > s.options.maxLayers)
+            throw Error(concat(pixelWhere, f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
+        try {
+            f.validate();
+        } catch (const Error& e) {
+            throw Error(pixelWhere + e.what());
+        }
+    }
+    std::vector<VisibilityFunction> copy(pixels.begin(), pixels.end());
+    s.acceptTile(0, tx, ty, copy);
+}
+
+void MapWriter::finish() {
+    Impl& s = *impl_;
+    if (s.finished) throw Error(concat(s.where(), ": finish() called twice"));
+    for (std::uint32_t ty = 0; ty < tilesY(); ++ty)
+        for (std::uint32_t tx = 0; tx < tilesX(); ++tx)
+            if (!s.levels[0].written[std::size_t(ty) * tilesX() + tx])
+                throw Error(concat(s.where(), ": level 0 tile ", tx, ",", ty, " was never written"));
+
+    MapInfo info;
+    info.width = s.options.width;
+    info.height = s.options.height;
+    info.tileSize = s.options.tileSize;
+    info.channels = s.options.channels;
+    info.hasCounts = s.options.counts;
+    info.maxLayers = s.options.maxLayers;
+    info.camera = s.options.camera;
+    info.filter = s.options.filter;
+    info.filterWidth = s.options.filterWidth;
+    for (const Level& L : s.levels) info.levels.push_back(L.info);
+    format::Header header = format::headerFromInfo(info);
+
+    std::vector<format::LevelEntry> entries;
+    for (const Level& L : s.levels) {
+        std::vector<std::uint8_t> bytes;
+        bytes.reserve(L.directory.size() * format::kTileEntrySize);
+        for (const TileSummary& t : L.directory) format::encodeTileEntry(bytes, t);
+        format::LevelEntry e;
+        e.info = L.info;
+        e.directoryOffset = s.offset;
+        e.directoryCrc = format::crc32(bytes.data(), bytes.size());
+        s.writeBytes(bytes.data(), bytes.size());
+        entries.push_back(e);
+    }
+    std::vector<std::uint8_t> table;
+    for (const format::LevelEntry& e : entries) format::encodeLevelEntry(table, e);
+    header.levelTableOffset = s.offset;
+    header.levelTableCrc = format::crc32(table.data(), table.size());
+    s.writeBytes(table.data(), table.size());
+    const auto* metadata = reinterpret_cast<const std::uint8_t*>(s.options.metadata.data());
+    header.metadataOffset = s.offset;
+    header.metadataSize = s.options.metadata.size();
+    header.metadataCrc = format::crc32(metadata, s.options.metadata.size());
+    s.writeBytes(metadata, s.options.metadata.size());
+    header.fileSize = s.offset;
+
+    const std::vector<std::uint8_t> headerBytes = format::encodeHeader(header);
+    if (std::fseek(s.file, 0, SEEK_SET) != 0 ||
+        std::fwrite(headerBytes.data(), 1, headerBytes.size(), s.file) != headerBytes.size() ||
+        std::fflush(s.file) != 0 || ::fsync(::fileno(s.file)) != 0)
+        throw Error(concat(s.where(), ": write failed: ", std::strerror(errno)));
+    const int closed = std::fclose(s.file);
+    s.file = nullptr;
+    if (closed != 0) throw Error(concat(s.where(), ": close failed: ", std::strerror(errno)));
+    if (std::rename(s.temporaryPath.c_str(), s.path.c_str()) != 0)
+        throw Error(concat(s.where(), ": cannot rename the finished file into place: ", std::strerror(errno)));
+    s.finished = true;
+}
+
+}  // namespace dsm
