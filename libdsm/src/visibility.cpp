@@ -78,6 +78,16 @@ void VisibilityFunction::validate() const {
                                    channels_, " channels"));
     if (withCounts_ && count_.size() != n)
         throw Error(detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
+    view().validate();
+}
+
+void VisibilityView::validate() const {
+    const std::size_t n = z_.size();
+    if (v_.size() != n * static_cast<std::size_t>(channels_))
+        throw Error(detail::concat("visibility function: ", v_.size(), " values for ", n, " vertices of ",
+                                   channels_, " channels"));
+    if (!count_.empty() && count_.size() != n)
+        throw Error(detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
     std::size_t previousBegin = 0;
     for (std::size_t layer = 1; layer < layerCount(); ++layer) {
         const std::size_t b = layerBegin(layer);
