@@ -35,6 +35,7 @@ struct TileCache::Impl {
     /// `load` runs without any cache lock held and may throw; the exception
     /// propagates and nothing is cached. Two threads missing the same tile at
     /// once may both load it; the first to finish is kept.
+    /// A loader that returns null data is a bug: get() throws dsm::Error.
     std::shared_ptr<const void> get(const TileKey& key, const std::function<LoadedTile()>& load);
 
     /// Typed convenience over get().
@@ -45,7 +46,8 @@ struct TileCache::Impl {
 
     /// A fresh id for a newly opened file.
     std::uint64_t newFileId();
-    /// Drops every tile of one file (called when the file is closed).
+    /// Drops every tile of one file (called when the file is closed). Not
+    /// counted as evictions; tiles handed out stay valid.
     void forgetFile(std::uint64_t file);
 
     std::size_t budget() const;

@@ -19,7 +19,7 @@ struct TileCacheStats {
     std::uint64_t misses = 0;          ///< requests that had to read a tile
     std::uint64_t tilesRead = 0;       ///< tiles read and decoded from files
     std::uint64_t bytesRead = 0;       ///< stored (file) bytes read for those tiles
-    std::uint64_t evictions = 0;       ///< tiles dropped to stay within budget
+    std::uint64_t evictions = 0;       ///< tiles dropped to stay within budget (not by clear())
 };
 
 /// Holds decoded tiles of any number of files, least recently used first out,
@@ -41,10 +41,12 @@ public:
     TileCache& operator=(const TileCache&) = delete;
 
     std::size_t budget() const;
-    /// Changes the budget; evicts at once if the cache holds more.
+    /// Changes the budget; evicts at once (least recently used first) if the
+    /// cache holds more. A budget of 0 keeps only the most recent tile.
     void setBudget(std::size_t budgetBytes);
     TileCacheStats stats() const;
-    /// Zeroes the counters; peaks restart from the current use.
+    /// Zeroes the counters (hits, misses, tilesRead, bytesRead, evictions);
+    /// peakBytesInUse restarts from the current bytesInUse.
     void resetStats();
     /// Drops every tile the cache holds (tiles handed out stay valid).
     void clear();
