@@ -28,7 +28,8 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
     return out;
 }
 
-VisibilityFunction averageFunctions(std::span<const VisibilityView> children, double tolerance, bool withCounts) {
+VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
+                                    double tolerance, bool withCounts) {
     int channels = 1;
     bool anyVertices = false;
     for (const VisibilityView& c : children) {
@@ -39,7 +40,6 @@ VisibilityFunction averageFunctions(std::span<const VisibilityView> children, do
     std::vector<VisibilityFunction> inputs;
     inputs.reserve(children.size());
     for (const VisibilityView& c : children) inputs.push_back(lightCentreFunction(c, channels, withCounts));
-    const std::vector<double> weights(children.size(), 1.0);
     CompressorOptions options;
     options.tolerance = tolerance;
     options.channels = channels;

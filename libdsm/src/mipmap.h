@@ -14,9 +14,10 @@ namespace dsm {
 /// is blocked there. Counts of layer 0 are kept when `withCounts`.
 VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bool withCounts);
 
-/// The equal-weight average of the light-centre functions of `children`
-/// (by the sweep), compressed with `tolerance`; monochrome when the children
-/// allow it. Counts add up when `withCounts`. Empty when every child is empty.
-VisibilityFunction averageFunctions(std::span<const VisibilityView> children, double tolerance, bool withCounts);
+/// The weighted average of the light-centre functions of `children` (by the
+/// sweep), compressed with `tolerance`; monochrome when the children allow it.
+/// Counts add up when `withCounts`. Empty when every child is empty.
+VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
+                                    double tolerance, bool withCounts);
 
 }  // namespace dsm

@@ -14,66 +14,11 @@
 #include "text.h"
 #include "tile_cache_impl.h"
 #include "tile_codec.h"
+#include "reader_impl.h"
 
 namespace dsm {
 
 using detail::concat;
-
-struct DeepShadowMap::Impl {
-    std::string path;
-    int fd = -1;
-    ReaderOptions options;
-    MapInfo info;
-    std::vector<std::vector<TileSummary>> directories;
-    std::shared_ptr<TileCache> cache;
-    std::uint64_t fileId = 0;
-
-    ~Impl() {
-        if (cache && fileId) cache->impl().forgetFile(fileId);
-        if (fd >= 0) ::close(fd);
-    }
-
-    std::string where() const { return concat("'", path, "'"); }
-    std::string tileWhere(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
-        return concat(where(), " level ", level, " tile ", tx, ",", ty);
-    }
-
-    void readAt(std::uint64_t offset, std::uint8_t* out, std::size_t size, const std::string& what) const {
-        std::size_t done = 0;
-        while (done < size) {
-            const ssize_t n = ::pread(fd, out + done, size - done, static_cast<off_t>(offset + done));
-            if (n < 0 && errno == EINTR) continue;
-            if (n < 0) throw Error(concat(what, ": read failed: ", std::strerror(errno)));
-            if (n == 0) throw Error(concat(what, ": unexpected end of file"));
-            done += static_cast<std::size_t>(n);
-        }
-    }
-
-    format::TileLayout layout() const { return {info.channels, info.hasCounts, info.maxLayers}; }
-
-    std::uint32_t tileExtent(std::uint32_t levelExtent, std::uint32_t t) const {
-        return std::min(info.tileSize, levelExtent - t * info.tileSize);
-    }
-
-    // Reads and decodes one tile (no cache).
-    LoadedTile loadTile(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
-        const LevelInfo& L = info.levels[level];
-        const TileSummary& t = directories[level][std::size_t(ty) * L.tilesX + tx];
-        const std::string where = tileWhere(level, tx, ty);
-        std::vector<std::uint8_t> stored(t.storedBytes);
-        if (!t.empty()) readAt(t.offset, stored.data(), stored.size(), where);
-        auto tile = std::make_shared<format::DecodedTile>(
-            format::decodeTile(stored, t, tileExtent(L.width, tx), tileExtent(L.height, ty), layout(), options, where,
-                               tx * info.tileSize, ty * info.tileSize));
-        LoadedTile loaded;
-        loaded.memoryBytes = tile->memoryBytes();
-        loaded.fileBytes = t.storedBytes;
-        loaded.data = std::move(tile);
-        return loaded;
-    }
-
-    void openFile(const std::string& p, const ReaderOptions& o);
-};
 
 void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o) {
     path = p;
@@ -175,6 +120,12 @@ void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o)
     fileId = cache->impl().newFileId();
 }
 
+std::shared_ptr<const format::DecodedTile> DeepShadowMap::Impl::getTile(unsigned level, std::uint32_t tx,
+                                                                        std::uint32_t ty) const {
+    const TileKey key{fileId, level, ty * info.levels[level].tilesX + tx};
+    return cache->impl().get<format::DecodedTile>(key, [&] { return loadTile(level, tx, ty); });
+}
+
 DeepShadowMap::DeepShadowMap() : impl_(std::make_unique<Impl>()) {}
 DeepShadowMap::~DeepShadowMap() = default;
 
@@ -196,8 +147,7 @@ PixelFunction DeepShadowMap::pixel(unsigned level, std::uint32_t x, std::uint32_
     if (x >= L.width || y >= L.height)
         throw Error(concat(s.where(), " level ", level, ": pixel ", x, ",", y, " is outside ", L.width, "x", L.height));
     const std::uint32_t tx = x / s.info.tileSize, ty = y / s.info.tileSize;
-    const TileKey key{s.fileId, level, ty * L.tilesX + tx};
-    auto tile = s.cache->impl().get<format::DecodedTile>(key, [&] { return s.loadTile(level, tx, ty); });
+    auto tile = s.getTile(level, tx, ty);
     const std::uint32_t w = s.tileExtent(L.width, tx);
     const VisibilityView view = tile->pixel(std::size_t(y - ty * s.info.tileSize) * w + (x - tx * s.info.tileSize));
     return PixelFunction(std::move(tile), view);

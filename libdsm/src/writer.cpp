@@ -98,17 +98,28 @@ struct MapWriter::Impl {
         const std::uint32_t ch = tileExtent(child.info.height, ty);
         const double tolerance = parent.info.tolerance;
         std::vector<VisibilityView> block;
+        std::vector<double> weights;
+        // Level-0 pixels covered by pixel x of `level` along one axis: fewer at
+        // the far edge of an odd-sized level, so each coarser pixel stays the
+        // exact average of the full-resolution pixels it covers.
+        const auto covered = [&](std::uint32_t x, std::uint32_t fullExtent) {
+            const std::uint64_t span = std::uint64_t(1) << level;
+            return static_cast<double>(std::min<std::uint64_t>((x + 1) * span, fullExtent) - x * span);
+        };
         for (std::uint32_t py = y0 / 2; py < (y0 + ch + 1) / 2; ++py) {
             for (std::uint32_t px = x0 / 2; px < (x0 + cw + 1) / 2; ++px) {
                 block.clear();
+                weights.clear();
                 for (std::uint32_t dy = 0; dy < 2; ++dy)
                     for (std::uint32_t dx = 0; dx < 2; ++dx) {
                         const std::uint32_t cx = 2 * px + dx, cy = 2 * py + dy;
-                        if (cx < x0 + cw && cy < y0 + ch)
+                        if (cx < x0 + cw && cy < y0 + ch) {
                             block.push_back(pixels[std::size_t(cy - y0) * cw + (cx - x0)].view());
+                            weights.push_back(covered(cx, options.width) * covered(cy, options.height));
+                        }
                     }
                 p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)] =
-                    averageFunctions(block, tolerance, options.counts);
+                    averageFunctions(block, weights, tolerance, options.counts);
             }
         }
         const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *

@@ -194,12 +194,17 @@ private:
 class VisibilityCursor {
 public:
     explicit VisibilityCursor(const VisibilityView& function) : function_(function) {}
+    /// Starts the search at `position` (a value of position() from an earlier
+    /// cursor over the same function).
+    VisibilityCursor(const VisibilityView& function, std::size_t position) : function_(function), next_(position) {}
     explicit VisibilityCursor(const VisibilityFunction& function) : function_(function.view()) {}
     double evaluate(double z, int channel = 0);
     void evaluate(double z, double* out);
     /// Number of vertices stepped over by the linear searches so far (for tests
     /// and benchmarks of coherence).
     std::uint64_t stepsTaken() const { return steps_; }
+    /// Where the next search starts.
+    std::size_t position() const { return next_; }
 
 private:
     std::size_t locate(double z);  // first vertex of layer 0 with z_k > z

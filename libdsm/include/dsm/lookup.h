@@ -1,0 +1,78 @@
+// Filtered shadow lookups in a deep shadow map (Lokovic & Veach 2000, §3.4,
+// §5.3): V(x, y, z) = sum_ij w_ij V_ij(z) / sum_ij w_ij.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <memory>
+
+#include "dsm/map_info.h"
+#include "dsm/reader.h"
+
+namespace dsm {
+
+struct LookupOptions {
+    /// Filter shape. All are separable over pixel centres; a pixel's weight is
+    /// kx(d_x) * ky(d_y), d = pixel centre - lookup point, in pixels of the
+    /// level used:
+    ///  - Box: the overlap of the pixel [i, i+1] with [x - w/2, x + w/2]; width 1
+    ///    is bilinear interpolation between the four nearest pixel centres.
+    ///  - Triangle: max(0, 1 - |d| / (w/2)); width 2 is bilinear.
+    ///  - Gaussian: exp(-d^2 / (2 s^2)) with s = w/4, cut at |d| = w/2.
+    PixelFilter filter = PixelFilter::Box;
+    /// Filter width in level-0 pixels. The smallest useful width (1 for the box,
+    /// 2 for the others) is used when a smaller one is asked for.
+    double filterWidth = 1.0;
+    /// Mip level: -1 chooses from the filter width so that the footprint spans
+    /// 1-2 of the smallest width at the chosen level, and blends the two nearest
+    /// levels linearly (trilinear mip-mapping). >= 0 uses that level only
+    /// (clamped to the coarsest), with the width scaled to it.
+    int level = -1;
+    /// Subtracted from the query depth, against self-shadowing (light units).
+    double bias = 0.0;
+};
+
+struct LookupResult {
+    /// Visibility per channel in [0, 1]; for a monochrome map only v[0] is
+    /// meaningful and v[1] = v[2] = v[0].
+    std::array<double, 3> v{1.0, 1.0, 1.0};
+    int channels = 1;
+    /// Bound on |v - exact| from compression: the largest recorded error bound
+    /// of the levels used (not counting the filter's own approximation).
+    double errorBound = 0.0;
+    /// Pixels with non-zero weight that were evaluated.
+    int pixelsUsed = 0;
+};
+
+/// Lookups for one thread. Keeps the last few tiles it touched (so coherent
+/// lookups rarely reach the shared cache) and, per recently used pixel, the
+/// segment of the last evaluation, searching forward or backward from it
+/// (Lokovic & Veach §3.4). Not thread-safe itself: give each thread its own.
+/// The map must stay open while the context is used.
+///
+/// Points outside the map (or behind a perspective light) are lit: V = 1.
+/// Pixels of the footprint that fall outside the image are left out and the
+/// weights of the others renormalised.
+class LookupContext {
+public:
+    explicit LookupContext(std::shared_ptr<const DeepShadowMap> map);
+    ~LookupContext();
+    LookupContext(const LookupContext&) = delete;
+    LookupContext& operator=(const LookupContext&) = delete;
+
+    /// Raster position (level-0 pixels, see LightCamera) and light depth z.
+    LookupResult raster(double rx, double ry, double z, const LookupOptions& options = {});
+    /// Point in light space.
+    LookupResult light(const std::array<double, 3>& p, const LookupOptions& options = {});
+    /// Point in world space, through the map's light camera.
+    LookupResult world(const std::array<double, 3>& p, const LookupOptions& options = {});
+
+    /// Number of segment steps taken by the per-pixel cursors (coherence).
+    std::uint64_t cursorSteps() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace dsm
