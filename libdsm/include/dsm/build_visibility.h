@@ -3,6 +3,7 @@
 // multilayer restarts of Xie et al. §5.1.
 #pragma once
 
+#include <cstdint>
 #include <span>
 
 #include "dsm/compressor.h"
@@ -22,7 +23,16 @@ namespace dsm {
 /// non-zero opacity plus volume steps over all rays.
 ///
 /// Errors name the ray index and the offending hit or sample.
+///
+/// `timings`, when given, receives the seconds spent in each stage (added to
+/// what it holds) and the number of transmittance vertices swept.
+struct PixelTimings {
+    double transmittanceSeconds = 0.0;
+    double sweepSeconds = 0.0;
+    double compressionSeconds = 0.0;
+    std::uint64_t transmittanceVertices = 0;
+};
 VisibilityFunction buildVisibility(std::span<const SampleRay> rays, std::span<const double> weights,
-                                   const CompressorOptions& options);
+                                   const CompressorOptions& options, PixelTimings* timings = nullptr);
 
 }  // namespace dsm

@@ -1,0 +1,69 @@
+// The reference sampler: renders a scene from the light and writes a deep
+// shadow map (Lokovic & Veach 2000, §3.2, §5.1, §5.5; Xie et al. 2007, §5.1).
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <string>
+
+#include "dsm/map_info.h"
+#include "dsm/scene.h"
+
+namespace dsm {
+
+struct BuildOptions {
+    /// Image size; 0 keeps the scene light's resolution.
+    std::uint32_t width = 0;
+    std::uint32_t height = 0;
+    /// Samples per pixel, stratified and jittered on a sqrt x sqrt grid when
+    /// spp is a square (otherwise on the nearest larger square's first cells).
+    std::uint32_t samplesPerPixel = 16;
+    /// Compression tolerance; negative means auto = 0.25 / sqrt(samples per
+    /// pixel) (Lokovic & Veach §4).
+    double tolerance = -1.0;
+    PixelFilter filter = PixelFilter::Gaussian;
+    /// Filter width in pixels (the footprint's diameter).
+    double filterWidth = 2.0;
+    /// 0 = full pyramid, 1 = no mip-maps, N levels otherwise.
+    unsigned mipLevels = 0;
+    std::uint32_t tileSize = 32;
+    /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts).
+    int mtsmLayers = 1;
+    /// Store sample counts even without MTSM layers.
+    bool counts = false;
+    /// Pixel rectangle [x0, x1) x [y0, y1) to build; the rest of the map is
+    /// left empty (for distributed builds stitched later). Empty = everything.
+    std::array<std::uint32_t, 4> region{0, 0, 0, 0};
+    /// Worker threads; 0 = all cores. The output does not depend on it.
+    unsigned threads = 0;
+    std::uint64_t seed = 1;
+    int zlibLevel = 6;
+    /// Called now and then with the fraction done, from the calling thread.
+    std::function<void(double)> progress;
+};
+
+struct BuildStats {
+    double samplingSeconds = 0.0;     ///< ray casting and transmittance (summed over threads)
+    double sweepSeconds = 0.0;        ///< filtering by the sweep (summed over threads)
+    double compressionSeconds = 0.0;  ///< L-infinity compression (summed over threads)
+    double writingSeconds = 0.0;      ///< tile encoding, mip levels and I/O
+    double wallSeconds = 0.0;
+    std::uint64_t samples = 0;        ///< sample rays cast
+    std::uint64_t sampleVertices = 0; ///< vertices of all transmittance functions (the raw data)
+    std::uint64_t pixels = 0;
+    std::uint64_t vertices = 0;       ///< level-0 vertices written
+    std::uint32_t maxVerticesPerPixel = 0;
+    double tolerance = 0.0;           ///< the level-0 tolerance used
+    std::uint64_t fileBytes = 0;
+    /// Bytes the raw per-sample transmittance vertices would take as float
+    /// (z, V per channel) pairs.
+    std::uint64_t rawBytes = 0;
+};
+
+/// Renders `scene` from its light and writes the map to `path` (atomically:
+/// nothing is left at `path` on failure). Deterministic: the same scene,
+/// options and seed give a byte-identical file for any thread count.
+BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path);
+
+}  // namespace dsm

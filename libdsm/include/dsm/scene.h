@@ -1,0 +1,152 @@
+// What a shadow needs to know about a scene: where the light is, and what
+// covers, attenuates or absorbs its light. No shading. The JSON form is
+// specified in spec/scene.md.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "dsm/map_info.h"
+
+namespace dsm {
+
+using Vec3 = std::array<double, 3>;
+using Rgb = std::array<float, 3>;
+
+/// The light as a camera. A spot light is a perspective camera at `position`
+/// looking along `direction`; a distant light is an orthographic camera
+/// looking along `direction` whose square window of half-size `extent` is
+/// centred on `position`.
+struct LightDescription {
+    Projection projection = Projection::Perspective;
+    Vec3 position{0.0, 0.0, 0.0};
+    Vec3 direction{0.0, 0.0, 1.0};
+    Vec3 up{0.0, 1.0, 0.0};
+    /// Full field of view across the wider image side, degrees (spot light).
+    double fieldOfViewDegrees = 45.0;
+    /// Half-size of the square window in world units (distant light).
+    double extent = 1.0;
+    std::uint32_t width = 512;
+    std::uint32_t height = 512;
+    double nearPlane = 0.0;
+    /// Radius of an area light centred on the light. The projection centre is
+    /// pushed back by radius / tan(fov/2) (Xie et al. 2007, eq. 4) so the map
+    /// sees whatever any point of the light sees.
+    double areaLightRadius = 0.0;
+};
+
+/// Triangles in object space.
+struct TriangleMesh {
+    std::vector<std::array<float, 3>> positions;
+    std::vector<std::array<std::uint32_t, 3>> triangles;
+};
+
+struct Sphere {
+    Vec3 center{0.0, 0.0, 0.0};
+    double radius = 1.0;
+};
+
+/// A flat rectangle: centre, two half-axes (the edges' half vectors).
+struct Quad {
+    Vec3 center{0.0, 0.0, 0.0};
+    Vec3 halfU{1.0, 0.0, 0.0};
+    Vec3 halfV{0.0, 0.0, 1.0};
+};
+
+/// Hair: polylines with a width, rendered as ribbons facing the light.
+struct Curves {
+    std::vector<std::uint32_t> pointsPerCurve;
+    std::vector<std::array<float, 3>> points;
+    /// One width per point, or one for all (size 1).
+    std::vector<float> widths{0.01f};
+};
+
+/// Procedural density fields inside a box.
+struct HomogeneousDensity {
+    double density = 1.0;
+};
+struct NoiseCloudDensity {
+    double density = 1.0;     ///< peak density
+    double frequency = 2.0;   ///< noise features per unit length
+    int octaves = 4;
+    std::uint32_t seed = 1;
+    /// Density fades to 0 towards the box boundary (1 = over the whole half-size).
+    double falloff = 1.0;
+};
+/// An OpenVDB float grid, sampled trilinearly (world units of the grid).
+struct VdbDensity {
+    std::string file;
+    std::string grid = "density";
+};
+
+/// A participating medium: extinction kappa = density * scale per unit length,
+/// sampled along each light ray every `step` units.
+struct Volume {
+    Vec3 boundsMin{-1.0, -1.0, -1.0};
+    Vec3 boundsMax{1.0, 1.0, 1.0};
+    std::variant<HomogeneousDensity, NoiseCloudDensity, VdbDensity> density;
+    double scale = 1.0;
+    double step = 0.05;
+};
+
+using Geometry = std::variant<TriangleMesh, Sphere, Quad, Curves, Volume>;
+
+struct SceneObject {
+    std::string name;
+    Geometry geometry;
+    /// Opacity per channel in [0, 1] (surfaces; volumes ignore it).
+    Rgb opacity{1.0f, 1.0f, 1.0f};
+    /// Row-major 4x4 object-to-world matrix.
+    std::array<double, 16> objectToWorld{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
+    /// World-space displacement over the shutter: at time t in [0, 1) the
+    /// object is translated by t * motion (linear motion blur).
+    Vec3 motion{0.0, 0.0, 0.0};
+};
+
+struct Scene {
+    LightDescription light;
+    std::vector<SceneObject> objects;
+    /// The JSON text the scene was read from (stored in a map's metadata).
+    std::string source;
+    /// File the scene came from, for messages.
+    std::string path;
+
+    /// True when some surface opacity differs between channels, so maps need
+    /// RGB visibility.
+    bool isColoured() const;
+};
+
+/// A ball of hair like Lokovic & Veach's Fig. 6: `count` curves rooted at
+/// random points of a sphere, growing outwards with random curl.
+struct HairBallParameters {
+    Vec3 center{0.0, 0.0, 0.0};
+    double radius = 1.0;
+    std::uint32_t count = 10000;
+    double length = 0.5;
+    /// Curl: how far (in radians per unit length) a hair turns.
+    double curl = 4.0;
+    double width = 0.002;
+    std::uint32_t segments = 8;
+    std::uint32_t seed = 1;
+};
+Curves generateHairBall(const HairBallParameters& parameters);
+
+/// Reads Cem Yuksel's binary .hair format (header "HAIR", points, optional
+/// segments, thickness). Throws dsm::Error naming the file on bad input.
+Curves loadHairFile(const std::string& path);
+
+/// Reads a scene file (spec/scene.md). Relative file names inside (OBJ, .hair,
+/// .vdb) are relative to the scene file. Throws dsm::Error naming the file, the
+/// JSON path (e.g. "/objects/2/opacity") and what was expected.
+Scene loadScene(const std::string& path);
+/// Parses scene JSON text; `baseDirectory` resolves relative file names and
+/// `name` is used in messages.
+Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name);
+
+/// The light camera of a scene's light (with the area-light push-back).
+LightCamera lightCamera(const LightDescription& light);
+
+}  // namespace dsm

@@ -1,0 +1,349 @@
+#include "dsm/sampler.h"
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <mutex>
+#include <vector>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "dsm/build_visibility.h"
+#include "dsm/compressor.h"
+#include "dsm/error.h"
+#include "dsm/writer.h"
+#include "ray_caster.h"
+#include "text.h"
+
+namespace dsm {
+
+using detail::concat;
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
+
+// SplitMix64: a small, fast generator whose output is the same everywhere,
+// so sample positions depend only on the seed and the pixel.
+class Random {
+public:
+    explicit Random(std::uint64_t seed) : state_(seed) {}
+    std::uint64_t next() {
+        std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
+        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
+        z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
+        return z ^ (z >> 31);
+    }
+    /// Uniform in [0, 1).
+    double uniform() { return static_cast<double>(next() >> 11) * 0x1p-53; }
+
+private:
+    std::uint64_t state_;
+};
+
+std::uint64_t pixelSeed(std::uint64_t seed, std::uint32_t x, std::uint32_t y) {
+    Random r(seed ^ (std::uint64_t(x) << 32 | y));
+    r.next();
+    return r.next() ^ (std::uint64_t(y) << 32 | x);
+}
+
+// Weight of a sample at offset (dx, dy) pixels from a pixel centre.
+double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
+    const double ax = std::abs(dx), ay = std::abs(dy);
+    if (ax >= radius || ay >= radius) return 0.0;
+    switch (filter) {
+        case PixelFilter::Box:
+            return 1.0;
+        case PixelFilter::Triangle:
+            return (1.0 - ax / radius) * (1.0 - ay / radius);
+        case PixelFilter::Gaussian: {
+            const double s = 0.5 * radius;
+            return std::exp(-(dx * dx + dy * dy) / (2.0 * s * s));
+        }
+    }
+    return 0.0;
+}
+
+// The light's frame in world space, for generating rays parametrised by depth.
+struct RayFrame {
+    Projection projection;
+    Vec3 origin;                 // projection centre (perspective) or window centre
+    Vec3 right, up, forward;     // light-space axes in world space
+    std::array<double, 4> window;
+    std::uint32_t width, height;
+
+    void ray(double rx, double ry, Vec3& o, Vec3& d) const {
+        const double sx = window[0] + rx / width * (window[1] - window[0]);
+        const double sy = window[3] - ry / height * (window[3] - window[2]);
+        if (projection == Projection::Perspective) {
+            o = origin;
+            for (std::size_t i = 0; i < 3; ++i) d[i] = forward[i] + sx * right[i] + sy * up[i];
+        } else {
+            for (std::size_t i = 0; i < 3; ++i) o[i] = origin[i] + sx * right[i] + sy * up[i];
+            d = forward;
+        }
+    }
+};
+
+RayFrame frameOf(const LightCamera& camera, std::uint32_t width, std::uint32_t height) {
+    // worldToLight is rigid: its rows are the light axes, and its inverse
+    // translation is the projection centre.
+    const auto& m = camera.worldToLight;
+    RayFrame f;
+    f.projection = camera.projection;
+    f.right = {m[0], m[1], m[2]};
+    f.up = {m[4], m[5], m[6]};
+    f.forward = {m[8], m[9], m[10]};
+    const Vec3 t{m[3], m[7], m[11]};
+    for (std::size_t i = 0; i < 3; ++i) f.origin[i] = -(f.right[i] * t[0] + f.up[i] * t[1] + f.forward[i] * t[2]);
+    f.window = camera.screenWindow;
+    f.width = width;
+    f.height = height;
+    return f;
+}
+
+std::string jsonString(const std::string& s) {
+    std::string out = "\"";
+    for (char c : s) {
+        switch (c) {
+            case '"': out += "\\\""; break;
+            case '\\': out += "\\\\"; break;
+            case '\n': out += "\\n"; break;
+            case '\t': out += "\\t"; break;
+            case '\r': out += "\\r"; break;
+            default:
+                if (static_cast<unsigned char>(c) < 0x20) {
+                    char buffer[8];
+                    std::snprintf(buffer, sizeof buffer, "\\u%04x", c);
+                    out += buffer;
+                } else {
+                    out += c;
+                }
+        }
+    }
+    return out + "\"";
+}
+
+const char* filterName(PixelFilter f) {
+    switch (f) {
+        case PixelFilter::Box: return "box";
+        case PixelFilter::Triangle: return "triangle";
+        case PixelFilter::Gaussian: return "gaussian";
+    }
+    return "?";
+}
+
+// Everything one sample ray met.
+struct SampleData {
+    std::vector<SurfaceHit> hits;
+    std::vector<VolumeSample> volume;
+    double x = 0.0, y = 0.0;  // raster position
+};
+
+struct TileStats {
+    PixelTimings timings;
+    double castSeconds = 0.0;
+    std::uint64_t samples = 0;
+    std::uint64_t rawVertices = 0;
+    std::uint64_t vertices = 0;
+    std::uint32_t maxVertices = 0;
+};
+
+}  // namespace
+
+BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
+    const auto wallStart = Clock::now();
+    LightDescription light = scene.light;
+    if (options.width) light.width = options.width;
+    if (options.height) light.height = options.height;
+    const std::uint32_t W = light.width, H = light.height;
+    const std::string where = concat("build '", path, "'");
+    if (W == 0 || H == 0) throw Error(concat(where, ": resolution ", W, "x", H, " is empty"));
+    if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
+        throw Error(concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
+    if (!std::isfinite(options.filterWidth) || options.filterWidth <= 0.0 || options.filterWidth > 64.0)
+        throw Error(concat(where, ": filter width ", options.filterWidth, " is not in (0, 64]"));
+    if (options.mtsmLayers < 1 || options.mtsmLayers > 255)
+        throw Error(concat(where, ": MTSM layer count ", options.mtsmLayers, " is not in [1, 255]"));
+    std::array<std::uint32_t, 4> region = options.region;
+    if (region == std::array<std::uint32_t, 4>{0, 0, 0, 0}) region = {0, 0, W, H};
+    if (region[0] >= region[2] || region[1] >= region[3] || region[2] > W || region[3] > H)
+        throw Error(concat(where, ": region ", region[0], ",", region[1], ",", region[2], ",", region[3],
+                           " is empty or outside the ", W, "x", H, " image"));
+
+    const LightCamera camera = lightCamera(light);
+    const RayFrame frame = frameOf(camera, W, H);
+    const int channels = scene.isColoured() ? 3 : 1;
+    const bool counts = options.counts || options.mtsmLayers > 1;
+    const std::uint32_t spp = options.samplesPerPixel;
+    const double tolerance = options.tolerance < 0.0 ? autoTolerance(spp) : options.tolerance;
+    if (!std::isfinite(tolerance)) throw Error(concat(where, ": tolerance ", tolerance, " is not finite"));
+    const double radius = 0.5 * options.filterWidth;
+    const int reach = std::max(0, static_cast<int>(std::ceil(radius - 0.5)));  // neighbour pixels with samples in range
+    const std::uint32_t gridY = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(spp)))));
+    const std::uint32_t gridX = (spp + gridY - 1) / gridY;
+
+    const RayCaster caster(scene);
+
+    WriterOptions w;
+    w.width = W;
+    w.height = H;
+    w.tileSize = options.tileSize;
+    w.channels = channels;
+    w.counts = counts;
+    w.maxLayers = options.mtsmLayers;
+    w.camera = camera;
+    w.filter = options.filter;
+    w.filterWidth = options.filterWidth;
+    w.tolerance = tolerance;
+    w.mipLevels = options.mipLevels;
+    w.zlibLevel = options.zlibLevel;
+    {
+        std::string m = "{\"software\":\"libdsm\",\"scene\":" + jsonString(scene.path) + ",\"settings\":{";
+        m += concat("\"resolution\":[", W, ",", H, "],\"spp\":", spp, ",\"tolerance\":", tolerance,
+                    ",\"filter\":\"", filterName(options.filter), "\",\"filter_width\":", options.filterWidth,
+                    ",\"tile_size\":", options.tileSize, ",\"mtsm_layers\":", options.mtsmLayers, ",\"seed\":",
+                    options.seed, ",\"region\":[", region[0], ",", region[1], ",", region[2], ",", region[3], "]}");
+        if (scene.source.size() <= 65536) m += ",\"scene_json\":" + jsonString(scene.source);
+        m += "}";
+        w.metadata = std::move(m);
+    }
+    MapWriter writer(path, w);
+
+    CompressorOptions compression;
+    compression.tolerance = tolerance;
+    compression.channels = channels;
+    compression.keepCounts = counts;
+    compression.maxLayers = options.mtsmLayers;
+
+    // Samples of one sample pixel, generated and cast on demand.
+    auto castPixel = [&](std::uint32_t px, std::uint32_t py, std::vector<SampleData>& out, TileStats& stats) {
+        const auto start = Clock::now();
+        Random rng(pixelSeed(options.seed, px, py));
+        std::vector<std::uint32_t> timeSlot(spp);
+        for (std::uint32_t k = 0; k < spp; ++k) timeSlot[k] = k;
+        for (std::uint32_t k = spp; k > 1; --k) std::swap(timeSlot[k - 1], timeSlot[rng.next() % k]);
+        std::vector<RaySurfaceHit> hits;
+        std::vector<RayVolumeSample> volume;
+        out.resize(spp);
+        for (std::uint32_t k = 0; k < spp; ++k) {
+            SampleData& s = out[k];
+            s.hits.clear();
+            s.volume.clear();
+            const std::uint32_t cx = k % gridX, cy = k / gridX;
+            s.x = px + (cx + rng.uniform()) / gridX;
+            s.y = py + (cy + rng.uniform()) / gridY;
+            const double time = (timeSlot[k] + rng.uniform()) / spp;
+            Vec3 o, d;
+            frame.ray(s.x, s.y, o, d);
+            hits.clear();
+            caster.surfaceHits(o, d, time, light.nearPlane, hits);
+            for (const RaySurfaceHit& h : hits) {
+                const Rgb& opacity = scene.objects[h.object].opacity;
+                s.hits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
+            }
+            volume.clear();
+            caster.volumeSamples(o, d, time, light.nearPlane, volume);
+            for (const RayVolumeSample& v : volume)
+                s.volume.push_back({static_cast<float>(v.t), static_cast<float>(v.extinction)});
+        }
+        stats.samples += spp;
+        stats.castSeconds += since(start);
+    };
+
+    auto computeTile = [&](std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>& pixels,
+                           TileStats& stats) {
+        const std::uint32_t x0 = tx * w.tileSize, y0 = ty * w.tileSize;
+        const std::uint32_t x1 = std::min(x0 + w.tileSize, W), y1 = std::min(y0 + w.tileSize, H);
+        pixels.assign(std::size_t(x1 - x0) * (y1 - y0), VisibilityFunction(channels, counts));
+        // Pixels of this tile inside the region.
+        const std::uint32_t rx0 = std::max(x0, region[0]), rx1 = std::min(x1, region[2]);
+        const std::uint32_t ry0 = std::max(y0, region[1]), ry1 = std::min(y1, region[3]);
+        if (rx0 >= rx1 || ry0 >= ry1) return;
+        // Sample pixels whose samples can reach them.
+        const std::uint32_t sx0 = rx0 >= std::uint32_t(reach) ? rx0 - reach : 0, sx1 = std::min(rx1 + reach, W);
+        const std::uint32_t sy0 = ry0 >= std::uint32_t(reach) ? ry0 - reach : 0, sy1 = std::min(ry1 + reach, H);
+        const std::uint32_t sw = sx1 - sx0;
+        std::vector<std::vector<SampleData>> samples(std::size_t(sw) * (sy1 - sy0));
+        for (std::uint32_t y = sy0; y < sy1; ++y)
+            for (std::uint32_t x = sx0; x < sx1; ++x) {
+                auto& s = samples[std::size_t(y - sy0) * sw + (x - sx0)];
+                castPixel(x, y, s, stats);
+                if (x >= rx0 && x < rx1 && y >= ry0 && y < ry1)
+                    for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
+            }
+        std::vector<SampleRay> rays;
+        std::vector<double> weights;
+        for (std::uint32_t y = ry0; y < ry1; ++y)
+            for (std::uint32_t x = rx0; x < rx1; ++x) {
+                rays.clear();
+                weights.clear();
+                const double cx = x + 0.5, cy = y + 0.5;
+                for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
+                    for (std::uint32_t nx = (x >= std::uint32_t(reach) ? x - reach : 0); nx < std::min(x + reach + 1, W);
+                         ++nx)
+                        for (const SampleData& s : samples[std::size_t(ny - sy0) * sw + (nx - sx0)]) {
+                            const double wgt = filterWeight(options.filter, radius, s.x - cx, s.y - cy);
+                            if (wgt <= 0.0) continue;
+                            rays.push_back({s.hits, s.volume});
+                            weights.push_back(wgt);
+                        }
+                VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
+                if (rays.empty()) continue;  // a filter too narrow to catch a sample
+                try {
+                    f = buildVisibility(rays, weights, compression, &stats.timings);
+                } catch (const Error& e) {
+                    throw Error(concat(where, ": pixel ", x, ",", y, ": ", e.what()));
+                }
+                stats.vertices += f.size();
+                stats.maxVertices = std::max(stats.maxVertices, static_cast<std::uint32_t>(f.size()));
+            }
+    };
+
+    BuildStats result;
+    result.tolerance = tolerance;
+    const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
+    tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic : static_cast<int>(options.threads));
+    std::vector<std::vector<VisibilityFunction>> rowTiles(tilesX);
+    std::vector<TileStats> rowStats(tilesX);
+    for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
+        arena.execute([&] {
+            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tilesX, 1), [&](const auto& range) {
+                for (std::uint32_t tx = range.begin(); tx < range.end(); ++tx) {
+                    rowStats[tx] = TileStats{};
+                    computeTile(tx, ty, rowTiles[tx], rowStats[tx]);
+                }
+            });
+        });
+        const auto start = Clock::now();
+        for (std::uint32_t tx = 0; tx < tilesX; ++tx) {
+            writer.writeTile(tx, ty, rowTiles[tx]);
+            const TileStats& s = rowStats[tx];
+            result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
+            result.sweepSeconds += s.timings.sweepSeconds;
+            result.compressionSeconds += s.timings.compressionSeconds;
+            result.samples += s.samples;
+            result.sampleVertices += s.rawVertices;
+            result.vertices += s.vertices;
+            result.maxVerticesPerPixel = std::max(result.maxVerticesPerPixel, s.maxVertices);
+        }
+        result.writingSeconds += since(start);
+        if (options.progress) options.progress(double(ty + 1) / tilesY);
+    }
+    const auto start = Clock::now();
+    writer.finish();
+    result.writingSeconds += since(start);
+    result.pixels = std::uint64_t(region[2] - region[0]) * (region[3] - region[1]);
+    result.rawBytes = result.sampleVertices * (4u + 4u * static_cast<unsigned>(channels));
+    std::error_code ignored;
+    result.fileBytes = std::filesystem::file_size(path, ignored);
+    result.wallSeconds = since(wallStart);
+    return result;
+}
+
+}  // namespace dsm
