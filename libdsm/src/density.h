@@ -21,4 +21,12 @@ public:
 /// The returned field is 0 outside [volume.boundsMin, volume.boundsMax].
 std::unique_ptr<DensityField> makeDensityField(const Volume& volume);
 
+/// The box where an OpenVDB grid's density can be non-zero, in the grid's world
+/// space (= the volume's object space): the bounding box of the active voxels,
+/// grown by one voxel on every side (the reach of trilinear interpolation) and
+/// mapped from index to world space. Throws dsm::Error naming the file and
+/// grid when the file cannot be read, the grid is missing or not a float grid,
+/// or it has no active voxels.
+void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax);
+
 }  // namespace dsm

@@ -18,8 +18,8 @@ using Rgb = std::array<float, 3>;
 
 /// The light as a camera. A spot light is a perspective camera at `position`
 /// looking along `direction`; a distant light is an orthographic camera
-/// looking along `direction` whose square window of half-size `extent` is
-/// centred on `position`.
+/// looking along `direction` whose window, of half-size `extent` across the
+/// wider image side, is centred on `position` (spec/scene.md §3).
 struct LightDescription {
     Projection projection = Projection::Perspective;
     Vec3 position{0.0, 0.0, 0.0};
@@ -27,14 +27,18 @@ struct LightDescription {
     Vec3 up{0.0, 1.0, 0.0};
     /// Full field of view across the wider image side, degrees (spot light).
     double fieldOfViewDegrees = 45.0;
-    /// Half-size of the square window in world units (distant light).
+    /// Half-size of the window across the wider image side, world units
+    /// (distant light); the other side is scaled by the aspect ratio.
     double extent = 1.0;
     std::uint32_t width = 512;
     std::uint32_t height = 512;
+    /// Near plane, measured from `position` along `direction`.
     double nearPlane = 0.0;
-    /// Radius of an area light centred on the light. The projection centre is
-    /// pushed back by radius / tan(fov/2) (Xie et al. 2007, eq. 4) so the map
-    /// sees whatever any point of the light sees.
+    /// Radius of an area light centred on the light (spot lights only). The
+    /// projection centre is pushed back by d = radius / tan(theta), theta the
+    /// half-angle of the narrower image side (Xie et al. 2007, eq. 4), so the
+    /// map sees whatever any point of the light sees; depths and the near
+    /// plane grow by d.
     double areaLightRadius = 0.0;
 };
 
@@ -49,7 +53,8 @@ struct Sphere {
     double radius = 1.0;
 };
 
-/// A flat rectangle: centre, two half-axes (the edges' half vectors).
+/// A flat rectangle: centre and two perpendicular half-axes (corners at
+/// center +- halfU +- halfV).
 struct Quad {
     Vec3 center{0.0, 0.0, 0.0};
     Vec3 halfU{1.0, 0.0, 0.0};
@@ -73,7 +78,9 @@ struct NoiseCloudDensity {
     double frequency = 2.0;   ///< noise features per unit length
     int octaves = 4;
     std::uint32_t seed = 1;
-    /// Density fades to 0 towards the box boundary (1 = over the whole half-size).
+    /// The cloud fills the ellipsoid inscribed in the box; its density fades
+    /// to 0 over this fraction of the half-size towards the ellipsoid's surface
+    /// (0 = a hard edge, 1 = from the centre).
     double falloff = 1.0;
 };
 /// An OpenVDB float grid, sampled trilinearly (world units of the grid).
