@@ -151,6 +151,10 @@ LookupResult LookupContext::raster(double rx, double ry, double z, const LookupO
     if (!std::isfinite(options.bias)) throw Error(concat("lookup: bias ", options.bias, " is not finite"));
     LookupResult result;
     result.channels = info.channels;
+    // Points outside the raster [0, width] x [0, height] are lit (lookup.h),
+    // even when a wide footprint would reach pixels inside.
+    if (!(rx >= 0.0 && rx <= static_cast<double>(info.width) && ry >= 0.0 && ry <= static_cast<double>(info.height)))
+        return result;
     const double zq = z - options.bias;
     const double minWidth = minimumWidth(options.filter);
     const double width = std::max(options.filterWidth, minWidth);

@@ -96,6 +96,8 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
                        std::uint32_t height, const TileLayout& layout, const ReaderOptions& limits,
                        const std::string& where, std::uint32_t originX, std::uint32_t originY) {
     auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    // Pixel p of the tile in level coordinates, as the validation errors below name it.
+    auto pixelAt = [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); };
     DecodedTile tile;
     tile.width = width;
     tile.height = height;
@@ -129,9 +131,9 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     std::uint64_t previous = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t cumulative = r.u32();
-        if (cumulative < previous) fail(concat("pixel ", p, ": cumulative vertex count decreases"));
+        if (cumulative < previous) fail(concat(pixelAt(p), ": cumulative vertex count decreases"));
         if (cumulative - previous > limits.maxVerticesPerPixel)
-            fail(concat("pixel ", p, ": ", cumulative - previous, " vertices exceed the reader's limit ",
+            fail(concat(pixelAt(p), ": ", cumulative - previous, " vertices exceed the reader's limit ",
                         limits.maxVerticesPerPixel));
         tile.vertexStart[p + 1] = cumulative;
         previous = cumulative;
@@ -141,9 +143,9 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     std::vector<std::uint8_t> layers(pixels);
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint8_t flags = r.u8();
-        if (flags & ~kKnownPixelFlags) fail(concat("pixel ", p, ": unknown flags 0x", std::hex, int(flags)));
+        if (flags & ~kKnownPixelFlags) fail(concat(pixelAt(p), ": unknown flags 0x", std::hex, int(flags)));
         tile.channels[p] = (flags & kPixelRgb) ? 3 : 1;
-        if (tile.channels[p] > layout.fileChannels) fail(concat("pixel ", p, ": RGB pixel in a monochrome map"));
+        if (tile.channels[p] > layout.fileChannels) fail(concat(pixelAt(p), ": RGB pixel in a monochrome map"));
     }
     std::uint64_t layerTotal = 0, valueTotal = 0, expected = pixelTableBytes(pixels);
     const std::uint64_t perVertexExtra = 4 + (layout.hasCounts ? 4 : 0);
@@ -151,8 +153,8 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
         layers[p] = r.u8();
         const std::uint32_t n = tile.vertexStart[p + 1] - tile.vertexStart[p];
         if (layers[p] < 1 || layers[p] > layout.maxLayers)
-            fail(concat("pixel ", p, ": layer count ", int(layers[p]), " is not in [1, ", layout.maxLayers, "]"));
-        if (layers[p] > 1 && layers[p] > n) fail(concat("pixel ", p, ": ", int(layers[p]), " layers but ", n, " vertices"));
+            fail(concat(pixelAt(p), ": layer count ", int(layers[p]), " is not in [1, ", layout.maxLayers, "]"));
+        if (layers[p] > 1 && layers[p] > n) fail(concat(pixelAt(p), ": ", int(layers[p]), " layers but ", n, " vertices"));
         layerTotal += layers[p] - 1u;
         valueTotal += std::uint64_t(n) * tile.channels[p];
         expected += 4ull * (layers[p] - 1u) + n * (perVertexExtra + 4ull * tile.channels[p]);
