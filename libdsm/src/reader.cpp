@@ -1,5 +1,6 @@
 #include "dsm/reader.h"
 
+#include <bit>
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -83,7 +84,8 @@ void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o)
             const std::string tw = tileWhere(l, tx, ty);
             const std::uint64_t pixels = std::uint64_t(tileExtent(L.width, tx)) * tileExtent(L.height, ty);
             if (t.empty()) {
-                if (t.rawBytes != 0 || t.vertexCount != 0 || t.nonEmptyPixels != 0 || t.offset != 0)
+                if (t.rawBytes != 0 || t.vertexCount != 0 || t.nonEmptyPixels != 0 || t.offset != 0 || t.crc32 != 0 ||
+                    std::bit_cast<std::uint32_t>(t.minZ) != 0 || std::bit_cast<std::uint32_t>(t.maxZ) != 0)
                     throw Error(concat(tw, ": empty tile with non-zero directory fields"));
             } else {
                 if (t.offset < h.headerSize || t.offset > fileSize || t.storedBytes > fileSize - t.offset)
