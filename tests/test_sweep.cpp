@@ -1,1 +1,325 @@
-// Tests for the core; filled in below.
+// sweep(): the O(n log n) weighted average of visibility functions (LV §5.1),
+// checked against the O(n^2) oracle naiveAverage().
+#include <dsm/dsm.h>
+#include <gmock/gmock.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <random>
+#include <string>
+#include <tuple>
+#include <vector>
+
+#include "oracle.h"
+
+namespace {
+
+using dsm::VisibilityFunction;
+using dsm::test::RecordingSink;
+using ::testing::HasSubstr;
+
+constexpr double kSweepTolerance = 1e-9;
+
+RecordingSink runSweep(std::span<const VisibilityFunction> inputs, std::span<const double> weights, int channels) {
+    RecordingSink sink;
+    sink.channels = channels;
+    const std::optional<float> refused = dsm::sweep(inputs, weights, channels, sink);
+    EXPECT_FALSE(refused.has_value());
+    return sink;
+}
+
+std::uint64_t inputCount(std::span<const VisibilityFunction> inputs) {
+    std::uint64_t n = 0;
+    for (const VisibilityFunction& f : inputs) n += f.totalCount();
+    return n;
+}
+
+// Output structure and values against the oracle: one vertex per distinct
+// input depth with V(z-), a second one with V(z) when there is a step, the
+// count of the depth on the last vertex, values in [0, 1] and non-increasing.
+void expectMatchesOracle(std::span<const VisibilityFunction> inputs, std::span<const double> weights, int channels,
+                         const RecordingSink& out) {
+    const std::vector<dsm::test::ExactVertex> exact = dsm::test::naiveAverage(inputs, weights, channels);
+    std::map<float, std::uint64_t> countAt;
+    for (const VisibilityFunction& f : inputs)
+        for (std::size_t i = 0; i < f.size(); ++i) countAt[f.z(i)] += f.count(i);
+
+    std::size_t i = 0;
+    double previous[dsm::kMaxChannels] = {1.0, 1.0, 1.0};
+    for (const dsm::test::ExactVertex& e : exact) {
+        ASSERT_LT(i, out.vertices.size()) << "output ends before depth " << e.z;
+        ASSERT_EQ(out.vertices[i].z, static_cast<float>(e.z)) << "vertex " << i;
+        std::size_t last = i;
+        while (last + 1 < out.vertices.size() && out.vertices[last + 1].z == out.vertices[i].z) ++last;
+        ASSERT_LE(last - i, 1u) << "more than two vertices at depth " << e.z;
+        bool step = false;
+        for (int c = 0; c < channels; ++c) {
+            const auto cc = static_cast<std::size_t>(c);
+            ASSERT_NEAR(out.vertices[i].v[cc], e.left[c], kSweepTolerance) << "left limit at z = " << e.z;
+            ASSERT_NEAR(out.vertices[last].v[cc], e.right[c], kSweepTolerance) << "value at z = " << e.z;
+            if (std::abs(e.left[c] - e.right[c]) > kSweepTolerance) step = true;
+            for (std::size_t k = i; k <= last; ++k) {
+                const double v = out.vertices[k].v[cc];
+                ASSERT_GE(v, 0.0);
+                ASSERT_LE(v, previous[c]) << "increase at z = " << e.z;
+                previous[c] = v;
+            }
+        }
+        if (step) {
+            ASSERT_EQ(last, i + 1) << "step at z = " << e.z << " needs two vertices";
+        }
+        if (last > i) {
+            EXPECT_EQ(out.vertices[i].count, 0u);
+        }
+        EXPECT_EQ(out.vertices[last].count, countAt[static_cast<float>(e.z)]) << "count at z = " << e.z;
+        i = last + 1;
+    }
+    EXPECT_EQ(i, out.vertices.size()) << "output has vertices beyond the inputs";
+    std::uint64_t total = 0;
+    for (const auto& v : out.vertices) total += v.count;
+    EXPECT_EQ(total, inputCount(inputs));
+}
+
+struct Mix {
+    const char* name;
+    std::size_t functions;
+    int channels;
+    float depthGrid;   // > 0: many shared depths
+    bool zeroWeights;  // some weights exactly 0
+    bool uniformWeights;
+};
+
+void PrintTo(const Mix& mix, std::ostream* os) { *os << mix.name; }
+
+class SweepRandom : public ::testing::TestWithParam<Mix> {};
+
+TEST_P(SweepRandom, MatchesNaiveAverage) {
+    const Mix mix = GetParam();
+    std::mt19937_64 rng(1000 + mix.functions * 7 + static_cast<std::size_t>(mix.channels));
+    for (int trial = 0; trial < 3; ++trial) {
+        std::vector<VisibilityFunction> inputs;
+        std::vector<double> weights;
+        std::uniform_int_distribution<std::size_t> length(0, 24);
+        std::uniform_real_distribution<double> weight(0.01, 3.0);
+        dsm::test::RandomShape shape;
+        shape.depthGrid = mix.depthGrid;
+        for (std::size_t k = 0; k < mix.functions; ++k) {
+            inputs.push_back(dsm::test::randomMonotone(rng, length(rng), mix.channels, true, shape));
+            double w = mix.uniformWeights ? 1.0 : weight(rng);
+            if (mix.zeroWeights && k % 3 == 1) w = 0.0;
+            weights.push_back(w);
+        }
+        if (mix.zeroWeights) weights[0] = 0.5;  // at least one positive weight
+        const RecordingSink out = runSweep(inputs, weights, mix.channels);
+        expectMatchesOracle(inputs, weights, mix.channels, out);
+        if (HasFailure()) return;
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Mixes, SweepRandom,
+    ::testing::Values(Mix{"n1_mono", 1, 1, 0.0f, false, true}, Mix{"n1_rgb", 1, 3, 0.0f, false, false},
+                      Mix{"n2_mono", 2, 1, 0.0f, false, false}, Mix{"n2_rgb_shared", 2, 3, 0.25f, false, true},
+                      Mix{"n16_mono_shared", 16, 1, 0.25f, false, false},
+                      Mix{"n16_rgb_zero_weights", 16, 3, 0.0f, true, false},
+                      Mix{"n64_mono_zero_weights", 64, 1, 0.5f, true, false},
+                      Mix{"n64_rgb", 64, 3, 0.0f, false, false}, Mix{"n256_mono", 256, 1, 0.0f, false, true},
+                      Mix{"n256_rgb_shared", 256, 3, 0.125f, true, false}),
+    [](const ::testing::TestParamInfo<Mix>& info) { return std::string(info.param.name); });
+
+TEST(Sweep, SingleInputIsReproduced) {
+    VisibilityFunction f(1, true);
+    f.append(1.0f, 1.0f, 0);
+    f.append(1.0f, 0.5f, 2);
+    f.append(3.0f, 0.25f, 1);
+    f.append(5.0f, 0.25f, 1);
+    f.append(5.0f, 0.0f, 4);
+    const double w[] = {2.5};
+    const RecordingSink out = runSweep({&f, 1}, w, 1);
+    ASSERT_EQ(out.vertices.size(), 5u);
+    const double expected[] = {1.0, 0.5, 0.25, 0.25, 0.0};
+    const std::uint32_t counts[] = {0, 2, 1, 0, 5};
+    for (std::size_t i = 0; i < 5; ++i) {
+        EXPECT_EQ(out.vertices[i].z, f.z(i));
+        EXPECT_NEAR(out.vertices[i].v[0], expected[i], 1e-12);
+        EXPECT_EQ(out.vertices[i].count, counts[i]) << "vertex " << i;
+    }
+}
+
+TEST(Sweep, WeightedAverageOfStepAndSlope) {
+    VisibilityFunction step, slope;
+    step.append(2.0f, 1.0f);
+    step.append(2.0f, 0.0f);
+    slope.append(0.0f, 1.0f);
+    slope.append(4.0f, 0.0f);
+    const VisibilityFunction inputs[] = {step, slope};
+    const double w[] = {1.0, 3.0};
+    const RecordingSink out = runSweep(inputs, w, 1);
+    // Depths 0, 2 (left limit and step), 4.
+    ASSERT_EQ(out.vertices.size(), 4u);
+    EXPECT_NEAR(out.vertices[0].v[0], 1.0, 1e-12);
+    EXPECT_EQ(out.vertices[1].z, 2.0f);
+    EXPECT_NEAR(out.vertices[1].v[0], 0.25 + 0.75 * 0.5, 1e-12);
+    EXPECT_EQ(out.vertices[2].z, 2.0f);
+    EXPECT_NEAR(out.vertices[2].v[0], 0.75 * 0.5, 1e-12);
+    EXPECT_NEAR(out.vertices[3].v[0], 0.0, 1e-12);
+}
+
+TEST(Sweep, OutputIsDeterministic) {
+    std::mt19937_64 rng(31);
+    std::vector<VisibilityFunction> inputs;
+    std::vector<double> weights;
+    dsm::test::RandomShape shape;
+    shape.depthGrid = 0.25f;
+    for (int k = 0; k < 100; ++k) {
+        inputs.push_back(dsm::test::randomMonotone(rng, 20, 3, true, shape));
+        weights.push_back(0.1 + static_cast<double>(k % 7));
+    }
+    const RecordingSink a = runSweep(inputs, weights, 3);
+    const RecordingSink b = runSweep(inputs, weights, 3);
+    ASSERT_EQ(a.vertices.size(), b.vertices.size());
+    for (std::size_t i = 0; i < a.vertices.size(); ++i) {
+        EXPECT_EQ(a.vertices[i].z, b.vertices[i].z);
+        EXPECT_EQ(a.vertices[i].v, b.vertices[i].v);
+        EXPECT_EQ(a.vertices[i].count, b.vertices[i].count);
+    }
+}
+
+TEST(Sweep, NoInputsGiveNoVertices) {
+    RecordingSink sink;
+    EXPECT_FALSE(dsm::sweep({}, {}, 1, sink).has_value());
+    EXPECT_TRUE(sink.vertices.empty());
+    // Empty functions average to V = 1: no vertices either.
+    const VisibilityFunction empty[2] = {VisibilityFunction(), VisibilityFunction()};
+    const double w[] = {1.0, 1.0};
+    EXPECT_FALSE(dsm::sweep(empty, w, 1, sink).has_value());
+    EXPECT_TRUE(sink.vertices.empty());
+}
+
+TEST(Sweep, StopsWhereTheSinkRefuses) {
+    std::mt19937_64 rng(32);
+    std::vector<VisibilityFunction> inputs;
+    for (int k = 0; k < 8; ++k) inputs.push_back(dsm::test::randomMonotone(rng, 30, 1, false));
+    const std::vector<double> weights(inputs.size(), 1.0);
+    RecordingSink full;
+    ASSERT_FALSE(dsm::sweep(inputs, weights, 1, full).has_value());
+    ASSERT_GT(full.vertices.size(), 10u);
+    const float limit = full.vertices[full.vertices.size() / 2].z;
+    RecordingSink part;
+    part.refuseBeyond = limit;
+    const std::optional<float> refused = dsm::sweep(inputs, weights, 1, part);
+    ASSERT_TRUE(refused.has_value());
+    EXPECT_GT(*refused, limit);
+    // The first refused depth is the next depth of the full output.
+    const auto next = std::find_if(full.vertices.begin(), full.vertices.end(),
+                                   [&](const RecordingSink::Vertex& v) { return v.z > limit; });
+    ASSERT_NE(next, full.vertices.end());
+    EXPECT_EQ(*refused, next->z);
+    ASSERT_EQ(part.vertices.size(), static_cast<std::size_t>(next - full.vertices.begin()));
+    for (std::size_t i = 0; i < part.vertices.size(); ++i) EXPECT_EQ(part.vertices[i].v, full.vertices[i].v);
+}
+
+std::string sweepError(std::span<const VisibilityFunction> inputs, std::span<const double> weights, int channels) {
+    RecordingSink sink;
+    sink.channels = channels;
+    try {
+        dsm::sweep(inputs, weights, channels, sink);
+    } catch (const dsm::Error& e) {
+        return e.what();
+    }
+    return "no error";
+}
+
+VisibilityFunction simple(int channels = 1) {
+    VisibilityFunction f(channels);
+    const float v[3] = {0.5f, 0.5f, 0.5f};
+    f.append(1.0f, v);
+    return f;
+}
+
+TEST(Sweep, RejectsMismatchedChannels) {
+    const VisibilityFunction inputs[] = {simple(1), simple(3), simple(1)};
+    const double w[] = {1.0, 1.0, 1.0};
+    EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("input 1 has 3 channels"));
+    EXPECT_THAT(sweepError(inputs, w, 3), HasSubstr("input 0 has 1 channels"));
+    EXPECT_THAT(sweepError(inputs, w, 2), HasSubstr("channel count 2"));
+}
+
+TEST(Sweep, RejectsBadWeights) {
+    const VisibilityFunction inputs[] = {simple(), simple(), simple()};
+    {
+        const double w[] = {1.0, 1.0, -0.5};
+        EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("weight -0.5 of input 2"));
+    }
+    {
+        const double w[] = {std::numeric_limits<double>::quiet_NaN(), 1.0, 1.0};
+        EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("weight nan of input 0"));
+    }
+    {
+        const double w[] = {1.0, std::numeric_limits<double>::infinity(), 1.0};
+        EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("of input 1"));
+    }
+    {
+        const double w[] = {0.0, 0.0, 0.0};
+        EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("weights sum to 0"));
+    }
+    {
+        const double w[] = {1.0, 1.0};
+        EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("3 inputs but 2 weights"));
+    }
+}
+
+TEST(Sweep, RejectsLayeredInputs) {
+    VisibilityFunction layered = simple();
+    layered.beginLayer();
+    layered.append(2.0f, 0.5f);
+    const VisibilityFunction inputs[] = {simple(), layered};
+    const double w[] = {1.0, 1.0};
+    EXPECT_THAT(sweepError(inputs, w, 1), HasSubstr("input 1 has 2 layers"));
+}
+
+TEST(Sweep, ZeroWeightInputsKeepTheirDepthsAndCounts) {
+    VisibilityFunction a(1, true), b(1, true);
+    a.append(1.0f, 0.5f, 1);
+    b.append(2.0f, 0.0f, 3);
+    const VisibilityFunction inputs[] = {a, b};
+    const double w[] = {1.0, 0.0};
+    const RecordingSink out = runSweep(inputs, w, 1);
+    expectMatchesOracle(inputs, w, 1, out);
+    // The average ignores b entirely.
+    ASSERT_FALSE(out.vertices.empty());
+    EXPECT_NEAR(out.vertices.back().v[0], 0.5, 1e-12);
+}
+
+TEST(Sweep, ResultFeedsTheCompressorWithinTolerance) {
+    // sweep -> compressor with double values: bound max(eps, 2^-25) against
+    // the exact average.
+    std::mt19937_64 rng(33);
+    for (int channels : {1, 3}) {
+        std::vector<VisibilityFunction> inputs;
+        std::vector<double> weights;
+        for (int k = 0; k < 32; ++k) {
+            inputs.push_back(dsm::test::randomMonotone(rng, 12, channels, true));
+            weights.push_back(0.5 + static_cast<double>(k % 5));
+        }
+        for (double eps : {0.0, dsm::autoTolerance(32), 0.1}) {
+            dsm::CompressorOptions options;
+            options.tolerance = eps;
+            options.channels = channels;
+            options.keepCounts = true;
+            dsm::Compressor compressor(options);
+            ASSERT_FALSE(dsm::sweep(inputs, weights, channels, compressor).has_value());
+            const VisibilityFunction out = compressor.finish();
+            const auto exact = dsm::test::naiveAverage(inputs, weights, channels);
+            EXPECT_LE(dsm::test::maxErrorExact(exact, out, channels), std::max(eps, 0x1p-25) + kSweepTolerance)
+                << "eps " << eps << " channels " << channels;
+            EXPECT_EQ(out.totalCount(), inputCount(inputs));
+            EXPECT_NO_THROW(out.validate());
+        }
+    }
+}
+
+}  // namespace

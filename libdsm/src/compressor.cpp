@@ -356,7 +356,9 @@ int Compressor::layersUsed() const { return impl_->layers; }
 
 VisibilityFunction Compressor::finish() {
     Impl& s = *impl_;
-    if (!s.layerClosed) s.endLayer(s.layerEnding);
+    // A layer after the first keeps at least one vertex even when its input
+    // stayed at V = 1 within tolerance: an empty last layer is not valid.
+    if (!s.layerClosed) s.endLayer(s.layerEnding || s.layers > 1);
     VisibilityFunction rgb = s.full.take();
     VisibilityFunction grey = s.grey.take();
     const bool exactGrey = s.options.channels == kMaxChannels && s.options.allowMonochrome && s.maxSpread == 0.0;

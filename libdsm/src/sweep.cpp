@@ -24,8 +24,10 @@ struct Later {
     }
 };
 
-// A removed slope term this many times larger than the remaining sum means
-// the running sum may have lost digits to cancellation: recompute it exactly.
+// The running slope sum carries rounding errors of up to 2^-53 times the
+// magnitudes that went through it since it was last computed exactly. Once
+// those are this many times larger than the sum itself (a large slope term
+// removed again, perhaps long ago), recompute it exactly.
 constexpr double kCancellationLimit = 1e6;
 
 }  // namespace
@@ -59,16 +61,25 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
     for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
     std::vector<std::size_t> next(n, 0);
     std::vector<double> slope(n * nc, 0.0);  // current slope of each input, per channel
+    // Inputs of positive weight whose current value is exactly 0, per channel:
+    // when all are, the average is exactly 0 too (blocked light stays blocked,
+    // without the rounding residue of the running sum).
+    std::vector<unsigned char> atZero(n * nc, 0);
+    std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
+    std::size_t positive = 0;
+    for (std::size_t k = 0; k < n; ++k) positive += w[k] > 0.0;
 
+    // Inputs of weight 0 take part too: they add nothing to the value, but
+    // their depths and sample counts belong to the output.
     std::priority_queue<Event, std::vector<Event>, Later> heap;
     for (std::size_t k = 0; k < n; ++k)
-        if (w[k] > 0.0 && !inputs[k].empty()) heap.push({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+        if (!inputs[k].empty()) heap.push({inputs[k].z(0), static_cast<std::uint32_t>(k)});
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
     double lastEmitted[kMaxChannels] = {1.0, 1.0, 1.0};
     double left[kMaxChannels];
-    double removed[kMaxChannels];
+    double slopeMagnitude[kMaxChannels] = {0.0, 0.0, 0.0};  // through outSlope since it was exact
     double zCurrent = 0.0;
 
     while (!heap.empty()) {
@@ -77,7 +88,6 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
             left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
             left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
             value[c] = left[c];
-            removed[c] = 0.0;
         }
         zCurrent = z;
 
@@ -101,9 +111,19 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
                                (static_cast<double>(f.z(last + 1)) - static_cast<double>(z))
                          : 0.0;
                 double& s = slope[k * nc + c];
-                removed[c] = std::max(removed[c], std::abs(w[k] * s));
-                outSlope[c] += w[k] * (newSlope - s);
+                const double change = w[k] * (newSlope - s);
+                if (change != 0.0) {
+                    outSlope[c] += change;
+                    slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
+                }
                 s = newSlope;
+                if (w[k] > 0.0 && (after == 0.0) != static_cast<bool>(atZero[k * nc + c])) {
+                    atZero[k * nc + c] = after == 0.0;
+                    if (after == 0.0)
+                        ++zeroCount[c];
+                    else
+                        --zeroCount[c];
+                }
             }
             next[k] = last + 1;
             if (more) heap.push({f.z(last + 1), static_cast<std::uint32_t>(k)});
@@ -111,13 +131,18 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
 
         bool step = false;
         for (std::size_t c = 0; c < nc; ++c) {
-            if (removed[c] > kCancellationLimit * std::abs(outSlope[c])) {
+            if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
                 double exact = 0.0;
                 for (std::size_t k = 0; k < n; ++k) exact += w[k] * slope[k * nc + c];
                 outSlope[c] = exact;
+                slopeMagnitude[c] = std::abs(exact);
             }
             outSlope[c] = std::min(outSlope[c], 0.0);
             value[c] = std::clamp(value[c], 0.0, left[c]);
+            if (zeroCount[c] == positive) {
+                value[c] = 0.0;
+                outSlope[c] = 0.0;
+            }
             if (value[c] != left[c]) step = true;
         }
         if (count > UINT32_MAX)

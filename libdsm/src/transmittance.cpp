@@ -123,11 +123,11 @@ VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCo
                              (static_cast<double>(volume[s].z) - volume[s - 1].z);
             tauV = volumeTau[s - 1] + t * (volumeTau[s] - volumeTau[s - 1]);
         }
-        // Inside the volume the function is sloped, so the vertex before a step
-        // is needed to keep the interpolation exact; elsewhere it repeats the
-        // previous value and is left out.
-        const bool insideVolume = !volume.empty() && z > volume.front().z && z < volume.back().z;
-        if (atSample || insideVolume) emit(z, tauV, withCounts ? volumeCount : 0);
+        // Every depth here is a volume sample or a hit. At a hit this is the
+        // vertex before the step: it holds tau(z-) and keeps the function flat
+        // (or on the volume's slope) up to z, instead of interpolating from the
+        // previous vertex to the value after the step.
+        emit(z, tauV, withCounts ? volumeCount : 0);
 
         std::uint32_t hitCount = 0;
         while (h < hits.size() && hits[h].z == z) {

@@ -4,6 +4,10 @@
 
 #include <dsm/dsm.h>
 
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <random>
 #include <span>
 #include <vector>
 
@@ -36,5 +40,51 @@ double maxError(const VisibilityFunction& exact, const VisibilityFunction& appro
 /// channel min(c, approx.channels() - 1) of `approx` (for monochrome results of
 /// RGB input).
 double maxErrorAllChannels(const VisibilityFunction& exact, const VisibilityFunction& approx, std::size_t layer = 0);
+
+/// The exact (double) form of one layer of a stored function: one ExactVertex
+/// per distinct depth, O(n).
+std::vector<ExactVertex> exactVertices(const VisibilityFunction& f, std::size_t layer = 0);
+
+/// Largest |approx - exact| for a double-valued reference: at every vertex of
+/// `exact` (left limit and value), the midpoints between them, before the first
+/// and beyond the last. Channel c of `exact` is compared with channel
+/// min(c, approx.channels() - 1). Binary search: O(n log m), for big functions.
+double maxErrorExact(std::span<const ExactVertex> exact, const VisibilityFunction& approx, int channels,
+                     std::size_t layer = 0);
+
+/// Shape of the functions randomMonotone() makes.
+struct RandomShape {
+    double stepProbability = 0.3;  // a vertex repeats the previous depth (a vertical step)
+    double zeroProbability = 0.02; // a channel drops straight to 0
+    float depthGrid = 0.0f;        // > 0: depths on this grid (shared between functions)
+    float maxGap = 1.0f;           // largest depth increment
+    std::uint32_t maxCount = 3;    // counts uniform in [0, maxCount]
+};
+
+/// A random valid single-layer function: depths with repeats, values
+/// non-increasing in [0, 1] (as floats), channels independent.
+VisibilityFunction randomMonotone(std::mt19937_64& rng, std::size_t vertices, int channels, bool withCounts,
+                                  const RandomShape& shape = {});
+
+/// Direct evaluation of one ray's transmittance (LV §3.2): the product of
+/// (1 - opacity) over hits at depth <= z (< z for the left limit), times the
+/// volume transmittance, exact at the samples (trapezoid optical depth) and
+/// linear between them.
+double rayTransmittance(const SampleRay& ray, double z, int channel, bool leftLimit = false);
+
+/// A sink that keeps every vertex in double, for comparing the sweep with
+/// naiveAverage() beyond float precision. Refuses vertices deeper than
+/// `refuseBeyond`.
+struct RecordingSink final : VertexSink {
+    struct Vertex {
+        float z;
+        std::array<double, kMaxChannels> v;
+        std::uint32_t count;
+    };
+    std::vector<Vertex> vertices;
+    float refuseBeyond = std::numeric_limits<float>::infinity();
+    bool push(float z, const double* values, std::uint32_t count) override;
+    int channels = 1;
+};
 
 }  // namespace dsm::test
