@@ -78,6 +78,7 @@ struct Box {
         }
     }
     void grow(const Box& b) {
+        if (b.lo[0] > b.hi[0]) return;  // empty
         grow(b.lo);
         grow(b.hi);
     }
@@ -91,7 +92,7 @@ struct Box {
 };
 
 // Slab test: the parameter range [t0, t1] of the ray inside the box.
-bool slabs(const Box& b, const Vec3& o, const Vec3& inv, double tMin, double tMax, double& t0, double& t1) {
+[[gnu::always_inline]] inline bool slabs(const Box& b, const Vec3& o, const Vec3& inv, double tMin, double tMax, double& t0, double& t1) {
     t0 = tMin;
     t1 = tMax;
     for (std::size_t i = 0; i < 3; ++i) {
@@ -243,19 +244,69 @@ struct RayCaster::Impl {
             const Vec3 extent = sub(centreBox.hi, centreBox.lo);
             if (extent[1] > extent[axis]) axis = 1;
             if (extent[2] > extent[axis]) axis = 2;
-            if (n <= 4 || extent[axis] <= 0.0) {
+            if (n <= 2 || extent[axis] <= 0.0) {
                 nodes[task.node].first = task.begin;
                 nodes[task.node].count = n;
                 continue;
             }
-            // Median split on the widest axis of the centres: balanced, and the
-            // build order is fully determined by the input.
-            const std::uint32_t mid = task.begin + n / 2;
-            std::nth_element(order.begin() + task.begin, order.begin() + mid, order.begin() + task.end,
-                             [&](std::uint32_t a, std::uint32_t b) {
-                                 return centres[a][axis] < centres[b][axis] ||
-                                        (centres[a][axis] == centres[b][axis] && a < b);
-                             });
+            // Binned surface-area heuristic on the widest axis of the centres
+            // (a good tree matters: every sample ray visits every node it
+            // crosses, since it needs all hits, not the nearest).
+            constexpr int kBins = 16;
+            Box binBox[kBins];
+            std::uint32_t binCount[kBins] = {};
+            const double lo = centreBox.lo[axis], width = extent[axis];
+            auto binOf = [&](std::uint32_t prim) {
+                const int b = static_cast<int>((centres[prim][axis] - lo) / width * kBins);
+                return std::clamp(b, 0, kBins - 1);
+            };
+            for (std::uint32_t i = task.begin; i < task.end; ++i) {
+                const int b = binOf(order[i]);
+                binBox[b].grow(boxes[order[i]]);
+                ++binCount[b];
+            }
+            auto area = [](const Box& b) {
+                if (b.lo[0] > b.hi[0]) return 0.0;
+                const Vec3 e = sub(b.hi, b.lo);
+                return e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
+            };
+            double rightArea[kBins];
+            std::uint32_t rightCount[kBins];
+            {
+                Box acc;
+                std::uint32_t count = 0;
+                for (int b = kBins - 1; b > 0; --b) {
+                    acc.grow(binBox[b]);
+                    count += binCount[b];
+                    rightArea[b] = area(acc);
+                    rightCount[b] = count;
+                }
+            }
+            double bestCost = std::numeric_limits<double>::infinity();
+            int bestSplit = -1;
+            {
+                Box acc;
+                std::uint32_t count = 0;
+                for (int b = 0; b + 1 < kBins; ++b) {
+                    acc.grow(binBox[b]);
+                    count += binCount[b];
+                    if (count == 0 || rightCount[b + 1] == 0) continue;
+                    const double cost = area(acc) * count + rightArea[b + 1] * rightCount[b + 1];
+                    if (cost < bestCost) {
+                        bestCost = cost;
+                        bestSplit = b;
+                    }
+                }
+            }
+            const double leafCost = area(box) * n;
+            if (bestSplit < 0 || (n <= 4 && leafCost <= bestCost + area(box))) {
+                nodes[task.node].first = task.begin;
+                nodes[task.node].count = n;
+                continue;
+            }
+            const auto middle = std::stable_partition(order.begin() + task.begin, order.begin() + task.end,
+                                                      [&](std::uint32_t prim) { return binOf(prim) <= bestSplit; });
+            const std::uint32_t mid = static_cast<std::uint32_t>(middle - order.begin());
             const std::uint32_t left = static_cast<std::uint32_t>(nodes.size());
             nodes.emplace_back();
             const std::uint32_t right = static_cast<std::uint32_t>(nodes.size());
