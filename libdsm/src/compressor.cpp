@@ -58,6 +58,7 @@ public:
                 windowSlopes(z, v[c], c, lo, hi);
                 hi_[c] = std::min(hi, 0.0);
                 lo_[c] = std::min(lo, hi_[c]);
+                rawSlopes(z, v[c], c, rawLo_[c], rawHi_[c]);
             }
         } else {
             for (int c = 0; c < channels_; ++c) {
@@ -65,6 +66,9 @@ public:
                 windowSlopes(z, v[c], c, lo, hi);
                 lo_[c] = std::max(lo_[c], lo);
                 hi_[c] = std::min(hi_[c], hi);
+                rawSlopes(z, v[c], c, lo, hi);
+                rawLo_[c] = std::max(rawLo_[c], lo);
+                rawHi_[c] = std::min(rawHi_[c], hi);
             }
         }
         lastZ_ = z;
@@ -99,6 +103,13 @@ private:
         const double bottom = std::max(v - window_, 0.0);
         lo = (bottom - originV_[c]) / dz;
         hi = (top - originV_[c]) / dz;
+    }
+
+    // The windows before clipping to [0, 1] and to non-increasing lines.
+    void rawSlopes(float z, double v, int c, double& lo, double& hi) const {
+        const double dz = static_cast<double>(z) - originZ_;
+        lo = (v - window_ - originV_[c]) / dz;
+        hi = (v + window_ - originV_[c]) / dz;
     }
 
     bool fitsWindow(float z, const double* v) const {
@@ -161,7 +172,13 @@ private:
         float end[kMaxChannels];
         bool flat = true;
         for (int c = 0; c < channels_; ++c) {
-            const double slope = 0.5 * (lo_[c] + hi_[c]);
+            // Lokovic & Veach's midpoint rule, taken on the windows the data
+            // itself defines and then moved into the feasible range. Clipping
+            // at V = 1 or at slope 0 first would bias the midpoint: flat runs
+            // (lit space, the plateau after a surface) would tilt by eps / 2.
+            double slope = 0.5 * (rawLo_[c] + rawHi_[c]);
+            if (!(rawLo_[c] <= rawHi_[c])) slope = 0.5 * (lo_[c] + hi_[c]);
+            slope = std::clamp(slope, lo_[c], hi_[c]);
             const double ideal = originV_[c] + slope * dz;
             end[c] = std::clamp(static_cast<float>(ideal), 0.0f, static_cast<float>(originV_[c]));
             if (end[c] != static_cast<float>(originV_[c])) flat = false;
@@ -198,6 +215,8 @@ private:
     bool open_ = false;  // a segment has accepted at least one vertex beyond the origin
     double lo_[kMaxChannels] = {};
     double hi_[kMaxChannels] = {};
+    double rawLo_[kMaxChannels] = {};
+    double rawHi_[kMaxChannels] = {};
     float lastZ_ = 0.0f;
     std::uint64_t segmentCount_ = 0;
 };

@@ -242,13 +242,13 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             Vec3 o, d;
             frame.ray(s.x, s.y, o, d);
             hits.clear();
-            caster.surfaceHits(o, d, time, light.nearPlane, hits);
+            caster.surfaceHits(o, d, time, camera.nearPlane, hits);
             for (const RaySurfaceHit& h : hits) {
                 const Rgb& opacity = scene.objects[h.object].opacity;
                 s.hits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
             }
             volume.clear();
-            caster.volumeSamples(o, d, time, light.nearPlane, volume);
+            caster.volumeSamples(o, d, time, camera.nearPlane, volume);
             for (const RayVolumeSample& v : volume)
                 s.volume.push_back({static_cast<float>(v.t), static_cast<float>(v.extinction)});
         }

@@ -61,6 +61,11 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
     for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
     std::vector<std::size_t> next(n, 0);
     std::vector<double> slope(n * nc, 0.0);  // current slope of each input, per channel
+    // Inputs whose current segment slopes (in any channel of positive weight):
+    // an exact recomputation of the slope sum only needs these, and when there
+    // are none the sum is exactly 0. Kept in a list with swap-removal.
+    std::vector<std::uint32_t> sloped;
+    std::vector<std::uint32_t> slopedAt(n, UINT32_MAX);
     // Inputs of positive weight whose current value is exactly 0, per channel:
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
@@ -125,15 +130,30 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
                         --zeroCount[c];
                 }
             }
+            bool isSloped = false;
+            for (std::size_t c = 0; c < nc; ++c) isSloped = isSloped || (w[k] > 0.0 && slope[k * nc + c] != 0.0);
+            if (isSloped && slopedAt[k] == UINT32_MAX) {
+                slopedAt[k] = static_cast<std::uint32_t>(sloped.size());
+                sloped.push_back(static_cast<std::uint32_t>(k));
+            } else if (!isSloped && slopedAt[k] != UINT32_MAX) {
+                const std::uint32_t moved = sloped.back();
+                sloped[slopedAt[k]] = moved;
+                slopedAt[moved] = slopedAt[k];
+                sloped.pop_back();
+                slopedAt[k] = UINT32_MAX;
+            }
             next[k] = last + 1;
             if (more) heap.push({f.z(last + 1), static_cast<std::uint32_t>(k)});
         }
 
         bool step = false;
         for (std::size_t c = 0; c < nc; ++c) {
-            if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
+            if (sloped.empty()) {
+                outSlope[c] = 0.0;
+                slopeMagnitude[c] = 0.0;
+            } else if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
                 double exact = 0.0;
-                for (std::size_t k = 0; k < n; ++k) exact += w[k] * slope[k * nc + c];
+                for (std::uint32_t k : sloped) exact += w[k] * slope[k * nc + c];
                 outSlope[c] = exact;
                 slopeMagnitude[c] = std::abs(exact);
             }
