@@ -223,7 +223,12 @@ Rays genRays(int n, int channels) {
                    rc::gen::pair(uniform(0, 40), uniform(0, 300))));
         for (const auto& [zi, kappa] : volumeCodes)
             r.volumes[static_cast<std::size_t>(k)].push_back({0.25f * static_cast<float>(zi), kappa / 100.0f});
-        if (!volumeCodes.empty()) r.samples += volumeCodes.size() - 1;
+        // One count per volume step of positive length: distinct sample depths - 1.
+        std::vector<int> depths;
+        for (const auto& code : volumeCodes) depths.push_back(code.first);
+        std::sort(depths.begin(), depths.end());
+        depths.erase(std::unique(depths.begin(), depths.end()), depths.end());
+        if (!depths.empty()) r.samples += depths.size() - 1;
     }
     for (int k = 0; k < n; ++k)
         r.rays.push_back({r.hits[static_cast<std::size_t>(k)], r.volumes[static_cast<std::size_t>(k)]});

@@ -108,7 +108,9 @@ VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCo
         bool atSample = false;
         std::uint32_t volumeCount = 0;
         while (s < volume.size() && volume[s].z == z) {
-            if (s > 0) ++volumeCount;  // a volume step ends here
+            // A volume step of positive length ends here (samples repeated at
+            // one depth mark a jump of extinction, not a step).
+            if (s > 0 && volume[s].z > volume[s - 1].z) ++volumeCount;
             atSample = true;
             ++s;
         }

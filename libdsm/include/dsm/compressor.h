@@ -12,7 +12,8 @@ namespace dsm {
 
 struct CompressorOptions {
     /// The L-infinity tolerance epsilon, >= 0. 0 keeps every vertex except
-    /// collinear ones; values >= 1 reduce any function to its last value.
+    /// collinear ones; values >= 1 reduce any function to one segment (two
+    /// vertices, three for some RGB input), still within the bound.
     double tolerance = 0.0;
     /// Channels of the input: 1, or 3 for RGB.
     int channels = 1;

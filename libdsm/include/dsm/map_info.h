@@ -56,8 +56,9 @@ struct LevelInfo {
     /// The compression tolerance epsilon used for this level's functions.
     double tolerance = 0.0;
     /// Bound on |V - V_exact| for this level's functions against the exact
-    /// average of the full-resolution functions it summarises: the sum of the
-    /// tolerances of this level and every finer one.
+    /// average of the full-resolution functions it summarises: the sum over
+    /// this level and every finer one of max(tolerance, 2^-25), the compressor's
+    /// bound including float32 rounding (see compressor.h).
     double errorBound = 0.0;
     std::uint64_t vertexCount = 0;
     std::uint64_t nonEmptyPixels = 0;

@@ -40,7 +40,7 @@ struct SampleRay {
 ///   samples, T_i = exp(-(z_{i+1} - z_i) (kappa_i + kappa_{i+1}) / 2).
 /// - tau is evaluated at the merged vertices of both and is linear between them.
 /// - Counts (when `withCounts`): 1 per surface hit, on the vertex after its
-///   step; 1 per volume step, on the vertex that ends the step.
+///   step; 1 per volume step of positive length, on the vertex that ends it.
 /// - `zStart`: only what lies strictly beyond zStart counts (used to start a new
 ///   MTSM layer behind an opaque one). Hits at z <= zStart are dropped; a volume
 ///   segment that straddles zStart is cut there, with kappa interpolated.

@@ -151,8 +151,8 @@ public:
     void reserve(std::size_t vertices);
     void clear();
 
-    /// Light-centre visibility at depth z for one channel, by binary search.
-    /// Computed in double from the stored floats.
+    /// Light-centre visibility at depth z for one channel (0 <= channel <
+    /// channels()), by binary search. Computed in double from the stored floats.
     double evaluate(double z, int channel = 0) const;
     /// All channels at once into out[channels()].
     void evaluate(double z, double* out) const;
