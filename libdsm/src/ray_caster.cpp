@@ -519,7 +519,13 @@ void RayCaster::volumeSamples(const Vec3& origin, const Vec3& direction, double 
         for (std::size_t i = begin; i < end; ++i) {
             const Span& sp = spans[i];
             if (t < sp.t0 || t > sp.t1) continue;
-            const double density = sp.volume->field->density(add(sp.o, scale(sp.d, t)));
+            // Inside [t0, t1] the point is in the box; clamp away the rounding
+            // that would put the samples on its faces (the entry and exit
+            // samples) just outside, where the density reads 0.
+            Vec3 p = add(sp.o, scale(sp.d, t));
+            for (std::size_t a = 0; a < 3; ++a)
+                p[a] = std::clamp(p[a], sp.volume->bounds.lo[a], sp.volume->bounds.hi[a]);
+            const double density = sp.volume->field->density(p);
             kappa += std::max(0.0, density) * sp.volume->scale;
         }
         return kappa * pathPerT;  // per unit depth (Lokovic & Veach, footnote 3)

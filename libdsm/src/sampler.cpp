@@ -228,6 +228,14 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
         std::vector<std::uint32_t> timeSlot(spp);
         for (std::uint32_t k = 0; k < spp; ++k) timeSlot[k] = k;
         for (std::uint32_t k = spp; k > 1; --k) std::swap(timeSlot[k - 1], timeSlot[rng.next() % k]);
+        // Strata: cell k of the gridX x gridY grid. When the grid has more
+        // cells than samples, spp of them are chosen at random per pixel, so
+        // that no part of the pixel is left out every time (unbiased).
+        std::vector<std::uint32_t> cell(gridX * gridY);
+        for (std::uint32_t k = 0; k < cell.size(); ++k) cell[k] = k;
+        if (cell.size() > spp)
+            for (std::uint32_t k = 0; k < spp; ++k)
+                std::swap(cell[k], cell[k + rng.next() % (cell.size() - k)]);
         std::vector<RaySurfaceHit> hits;
         std::vector<RayVolumeSample> volume;
         out.resize(spp);
@@ -235,7 +243,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             SampleData& s = out[k];
             s.hits.clear();
             s.volume.clear();
-            const std::uint32_t cx = k % gridX, cy = k / gridX;
+            const std::uint32_t cx = cell[k] % gridX, cy = cell[k] / gridX;
             s.x = px + (cx + rng.uniform()) / gridX;
             s.y = py + (cy + rng.uniform()) / gridY;
             const double time = (timeSlot[k] + rng.uniform()) / spp;

@@ -16,8 +16,11 @@ struct BuildOptions {
     /// Image size; 0 keeps the scene light's resolution.
     std::uint32_t width = 0;
     std::uint32_t height = 0;
-    /// Samples per pixel, stratified and jittered on a sqrt x sqrt grid when
-    /// spp is a square (otherwise on the nearest larger square's first cells).
+    /// Samples per pixel, stratified and jittered: one sample in each cell of
+    /// a g x ceil(spp / g) grid over the pixel, g = floor(sqrt(spp)) (a
+    /// sqrt x sqrt grid when spp is a square). When the grid has more cells
+    /// than spp, each pixel uses spp of them chosen at random. Shutter times
+    /// are stratified likewise, spp strata in random order.
     std::uint32_t samplesPerPixel = 16;
     /// Compression tolerance; negative means auto = 0.25 / sqrt(samples per
     /// pixel) (Lokovic & Veach §4).
