@@ -97,14 +97,33 @@ int main(int argc, char** argv) {
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_option("--region", region, "Build only pixels X0,Y0,X1,Y1 (half-open), for distributed builds");
     app.add_option("-j,--threads", options.threads, "Worker threads (0 = all cores)")->capture_default_str();
-    app.add_option("--seed", options.seed, "Random seed")->capture_default_str();
+    app.add_option("--seed", options.seed, "Random seed (a non-negative integer)")
+        ->check(CLI::Validator(
+            [](std::string& text) {
+                return text.find('-') == std::string::npos ? std::string() : "expects a non-negative integer";
+            },
+            "UINT", "non-negative"))
+        ->capture_default_str();
     app.add_option("-z,--zlib-level", options.zlibLevel, "zlib level 0..9 (0 stores tiles)")->capture_default_str();
     app.add_flag("-q,--quiet", quiet, "No progress or summary");
     app.add_option("--stats-json", statsJson, "Write the build statistics as JSON to this file");
-    CLI11_PARSE(app, argc, argv);
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        std::cerr << "dsm-build: " << e.what() << " (see --help)\n";
+        return 2;
+    }
 
     try {
         if (!resolution.empty()) {
+            if (resolution.find('-') != std::string::npos)
+                throw std::invalid_argument("--resolution expects positive WxH or N, got '" + resolution + "'");
             unsigned w = 0, h = 0;
             char x = 0, extra = 0;
             std::istringstream in(resolution);
@@ -115,6 +134,8 @@ int main(int argc, char** argv) {
                 if (!(again >> w >> x >> h) || x != 'x' || (again >> extra))
                     throw std::invalid_argument("--resolution expects WxH or N, got '" + resolution + "'");
             }
+            if (w == 0 || h == 0)
+                throw std::invalid_argument("--resolution expects positive WxH or N, got '" + resolution + "'");
             options.width = w;
             options.height = h;
         }
@@ -128,7 +149,8 @@ int main(int argc, char** argv) {
         } catch (const std::exception&) {
             throw std::invalid_argument("--tolerance and --mip-levels expect auto or a number");
         }
-        if (options.tolerance < -0.5 && tolerance != "auto") throw std::invalid_argument("--tolerance must be >= 0");
+        if (tolerance != "auto" && !(options.tolerance >= 0.0))
+            throw std::invalid_argument("--tolerance expects auto or a value >= 0, got '" + tolerance + "'");
         options.filter = filter == "box" ? dsm::PixelFilter::Box
                                          : filter == "triangle" ? dsm::PixelFilter::Triangle : dsm::PixelFilter::Gaussian;
         if (!region.empty()) {
@@ -144,6 +166,12 @@ int main(int argc, char** argv) {
     }
 
     try {
+        // Fail before the build, not after it, when the statistics cannot be written.
+        std::ofstream statsOut;
+        if (!statsJson.empty()) {
+            statsOut.open(statsJson);
+            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
+        }
         dsm::Scene scene;
         if (scenePath == "-") {
             std::stringstream text;
@@ -191,9 +219,9 @@ int main(int argc, char** argv) {
                                 {"file_bytes", s.fileBytes},
                                 {"raw_bytes", s.rawBytes},
                                 {"sample_vertices", s.sampleVertices}};
-            std::ofstream out(statsJson);
-            out << j.dump(2) << "\n";
-            if (!out) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
+            statsOut << j.dump(2) << "\n";
+            statsOut.flush();
+            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
         }
     } catch (const dsm::Error& e) {
         std::cerr << "dsm-build: ERROR " << e.what() << "\n";
