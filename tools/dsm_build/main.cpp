@@ -165,8 +165,17 @@ int main(int argc, char** argv) {
         return 2;
     }
 
+    // Fail before the build, not after it, when the statistics cannot be
+    // written; and leave no statistics file behind when the build fails.
+    bool statsDone = false;
+    struct RemoveUnlessDone {
+        const std::string& path;
+        const bool& done;
+        ~RemoveUnlessDone() {
+            if (!path.empty() && !done) std::remove(path.c_str());
+        }
+    } statsGuard{statsJson, statsDone};
     try {
-        // Fail before the build, not after it, when the statistics cannot be written.
         std::ofstream statsOut;
         if (!statsJson.empty()) {
             statsOut.open(statsJson);
@@ -222,6 +231,7 @@ int main(int argc, char** argv) {
             statsOut << j.dump(2) << "\n";
             statsOut.flush();
             if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
+            statsDone = true;
         }
     } catch (const dsm::Error& e) {
         std::cerr << "dsm-build: ERROR " << e.what() << "\n";
