@@ -113,7 +113,16 @@ struct LookupContext::Impl {
                 if (!f.empty()) {
                     const std::uint64_t key = (std::uint64_t(level) << 56) ^ (std::uint64_t(uy) << 28) ^ ux;
                     Hint& h = hints[(key * 0x9E3779B97F4A7C15ull) >> 54];
-                    VisibilityCursor cursor(f, h.key == key ? h.position : 0);
+                    // A remembered segment makes coherent lookups O(1); without one,
+                    // start from a binary search rather than walking from the front.
+                    std::size_t start = h.position;
+                    if (h.key != key) {
+                        const auto zs = f.depths().first(f.lightEnd());
+                        start = static_cast<std::size_t>(
+                            std::upper_bound(zs.begin(), zs.end(), z, [](double q, float zk) { return q < zk; }) -
+                            zs.begin());
+                    }
+                    VisibilityCursor cursor(f, start);
                     cursor.evaluate(z, v);
                     if (f.channels() == 1) v[1] = v[2] = v[0];
                     h.key = key;
