@@ -14,44 +14,11 @@ foreach(var CHECK DSM_BUILD DSM_INFO EXAMPLES_DIR WORK_DIR VERSION)
   endif()
 endforeach()
 
-# run(args...): runs dsm-build; sets RC, OUT and ERR in the caller.
+include("${CMAKE_CURRENT_LIST_DIR}/check_common.cmake")
+
+# run(args...): runs dsm-build; sets RC, OUT, ERR and LAST_COMMAND in the caller.
 function(run)
-  execute_process(COMMAND ${DSM_BUILD} ${ARGN}
-    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  set(RC "${rc}" PARENT_SCOPE)
-  set(OUT "${out}" PARENT_SCOPE)
-  set(ERR "${err}" PARENT_SCOPE)
-  set(LAST_COMMAND "dsm-build ${ARGN}" PARENT_SCOPE)
-endfunction()
-
-function(fail what)
-  message(FATAL_ERROR "${what}\n  command: ${LAST_COMMAND}\n  exit: ${RC}\n"
-                      "  stdout:\n${OUT}\n  stderr:\n${ERR}")
-endfunction()
-
-function(expect_rc expected)
-  if(NOT "${RC}" STREQUAL "${expected}")
-    fail("expected exit status ${expected}")
-  endif()
-endfunction()
-
-function(expect_contains var text)
-  string(FIND "${${var}}" "${text}" at)
-  if(at EQUAL -1)
-    fail("expected ${var} to contain '${text}'")
-  endif()
-endfunction()
-
-function(expect_matches var regex)
-  if(NOT "${${var}}" MATCHES "${regex}")
-    fail("expected ${var} to match '${regex}'")
-  endif()
-endfunction()
-
-function(expect_empty var)
-  if(NOT "${${var}}" STREQUAL "")
-    fail("expected ${var} to be empty")
-  endif()
+  run_tool("${DSM_BUILD}" dsm-build ${ARGN})
 endfunction()
 
 # Exactly one line on stderr, starting with the given prefix.
@@ -70,26 +37,6 @@ endfunction()
 function(expect_no_file path)
   if(EXISTS "${path}")
     fail("expected no file '${path}' after a failed build")
-  endif()
-endfunction()
-
-function(json_expect json expected)
-  string(JSON value ERROR_VARIABLE error GET "${json}" ${ARGN})
-  if(error)
-    fail("JSON: ${error}")
-  endif()
-  if(NOT "${value}" STREQUAL "${expected}")
-    fail("JSON ${ARGN}: expected '${expected}', got '${value}'")
-  endif()
-endfunction()
-
-function(json_expect_type json expected)
-  string(JSON value ERROR_VARIABLE error TYPE "${json}" ${ARGN})
-  if(error)
-    fail("JSON: ${error}")
-  endif()
-  if(NOT "${value}" STREQUAL "${expected}")
-    fail("JSON ${ARGN}: expected type ${expected}, got ${value}")
   endif()
 endfunction()
 

@@ -14,51 +14,17 @@ foreach(var CHECK DSM_INFO MAKE_SAMPLE_MAP WORK_DIR VERSION)
   endif()
 endforeach()
 
-# run(args...): runs dsm-info; sets RC, OUT and ERR in the caller.
+include("${CMAKE_CURRENT_LIST_DIR}/check_common.cmake")
+
+# run(args...): runs dsm-info; sets RC, OUT, ERR and LAST_COMMAND in the caller.
 function(run)
-  execute_process(COMMAND ${DSM_INFO} ${ARGN}
-    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-  set(RC "${rc}" PARENT_SCOPE)
-  set(OUT "${out}" PARENT_SCOPE)
-  set(ERR "${err}" PARENT_SCOPE)
-  set(LAST_COMMAND "dsm-info ${ARGN}" PARENT_SCOPE)
-endfunction()
-
-function(fail what)
-  message(FATAL_ERROR "${what}\n  command: ${LAST_COMMAND}\n  exit: ${RC}\n"
-                      "  stdout:\n${OUT}\n  stderr:\n${ERR}")
-endfunction()
-
-function(expect_rc expected)
-  if(NOT "${RC}" STREQUAL "${expected}")
-    fail("expected exit status ${expected}")
-  endif()
-endfunction()
-
-# expect_contains(VAR text): the variable's value contains text (literally).
-function(expect_contains var text)
-  string(FIND "${${var}}" "${text}" at)
-  if(at EQUAL -1)
-    fail("expected ${var} to contain '${text}'")
-  endif()
+  run_tool("${DSM_INFO}" dsm-info ${ARGN})
 endfunction()
 
 function(expect_not_contains var text)
   string(FIND "${${var}}" "${text}" at)
   if(NOT at EQUAL -1)
     fail("expected ${var} not to contain '${text}'")
-  endif()
-endfunction()
-
-function(expect_matches var regex)
-  if(NOT "${${var}}" MATCHES "${regex}")
-    fail("expected ${var} to match '${regex}'")
-  endif()
-endfunction()
-
-function(expect_empty var)
-  if(NOT "${${var}}" STREQUAL "")
-    fail("expected ${var} to be empty")
   endif()
 endfunction()
 
@@ -90,16 +56,6 @@ function(expect_one_error_line file)
   endif()
 endfunction()
 
-function(json_expect json expected)
-  string(JSON value ERROR_VARIABLE error GET "${json}" ${ARGN})
-  if(error)
-    fail("JSON: ${error}")
-  endif()
-  if(NOT "${value}" STREQUAL "${expected}")
-    fail("JSON ${ARGN}: expected '${expected}', got '${value}'")
-  endif()
-endfunction()
-
 # json_expect_number(json expected path...): a decimal number, allowing for
 # CMake printing doubles with 17 digits (0.1 -> 0.10000000000000001).
 function(json_expect_number json expected)
@@ -120,16 +76,6 @@ function(json_expect_length json expected)
   endif()
   if(NOT "${value}" STREQUAL "${expected}")
     fail("JSON ${ARGN}: expected length ${expected}, got ${value}")
-  endif()
-endfunction()
-
-function(json_expect_type json expected)
-  string(JSON value ERROR_VARIABLE error TYPE "${json}" ${ARGN})
-  if(error)
-    fail("JSON: ${error}")
-  endif()
-  if(NOT "${value}" STREQUAL "${expected}")
-    fail("JSON ${ARGN}: expected type ${expected}, got ${value}")
   endif()
 endfunction()
 
