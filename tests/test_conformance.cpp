@@ -7,20 +7,14 @@
 #include <dsm/dsm.h>
 
 #include <cstdlib>
-#include <fstream>
-#include <iterator>
 #include <vector>
 
+#include "map_fixtures.h"
 #include "temp_dir.h"
 
 namespace {
 
 const std::string kSample = std::string(DSM_SOURCE_DIR) + "/spec/samples/tiny.dsm";
-
-std::vector<char> readBytes(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-}
 
 // The content of the sample, as listed in the spec.
 void writeTinySample(const std::string& path) {
@@ -94,8 +88,8 @@ TEST(Conformance, WriterReproducesTheSampleByteForByte) {
     const std::string path = (dir / "tiny.dsm").string();
     writeTinySample(path);
     if (std::getenv("DSM_REGENERATE_SAMPLES")) writeTinySample(kSample);
-    const std::vector<char> expected = readBytes(kSample);
-    const std::vector<char> actual = readBytes(path);
+    const auto expected = dsm::test::readFile(kSample);
+    const auto actual = dsm::test::readFile(path);
     ASSERT_EQ(actual.size(), expected.size());
     EXPECT_TRUE(actual == expected) << "the writer's bytes differ from spec/samples/tiny.dsm";
 }

@@ -8,6 +8,7 @@
 #include <mutex>
 #include <vector>
 
+#include <nlohmann/json.hpp>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -107,28 +108,6 @@ RayFrame frameOf(const LightCamera& camera, std::uint32_t width, std::uint32_t h
     return f;
 }
 
-std::string jsonString(const std::string& s) {
-    std::string out = "\"";
-    for (char c : s) {
-        switch (c) {
-            case '"': out += "\\\""; break;
-            case '\\': out += "\\\\"; break;
-            case '\n': out += "\\n"; break;
-            case '\t': out += "\\t"; break;
-            case '\r': out += "\\r"; break;
-            default:
-                if (static_cast<unsigned char>(c) < 0x20) {
-                    char buffer[8];
-                    std::snprintf(buffer, sizeof buffer, "\\u%04x", c);
-                    out += buffer;
-                } else {
-                    out += c;
-                }
-        }
-    }
-    return out + "\"";
-}
-
 const char* filterName(PixelFilter f) {
     switch (f) {
         case PixelFilter::Box: return "box";
@@ -204,14 +183,21 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     w.mipLevels = options.mipLevels;
     w.zlibLevel = options.zlibLevel;
     {
-        std::string m = "{\"software\":\"libdsm\",\"scene\":" + jsonString(scene.path) + ",\"settings\":{";
-        m += concat("\"resolution\":[", W, ",", H, "],\"spp\":", spp, ",\"tolerance\":", tolerance,
-                    ",\"filter\":\"", filterName(options.filter), "\",\"filter_width\":", options.filterWidth,
-                    ",\"tile_size\":", options.tileSize, ",\"mtsm_layers\":", options.mtsmLayers, ",\"seed\":",
-                    options.seed, ",\"region\":[", region[0], ",", region[1], ",", region[2], ",", region[3], "]}");
-        if (scene.source.size() <= 65536) m += ",\"scene_json\":" + jsonString(scene.source);
-        m += "}";
-        w.metadata = std::move(m);
+        nlohmann::json m = {
+            {"software", "libdsm"},
+            {"scene", scene.path},
+            {"settings",
+             {{"resolution", {W, H}},
+              {"spp", spp},
+              {"tolerance", tolerance},
+              {"filter", filterName(options.filter)},
+              {"filter_width", options.filterWidth},
+              {"tile_size", options.tileSize},
+              {"mtsm_layers", options.mtsmLayers},
+              {"seed", options.seed},
+              {"region", region}}}};
+        if (scene.source.size() <= 65536) m["scene_json"] = scene.source;
+        w.metadata = m.dump();
     }
     MapWriter writer(path, w);
 
