@@ -1,0 +1,26 @@
+// A map's description as JSON: the schema of `dsm-info --json` (documented in
+// docs/dsm-info.md), shared by the tool and the Python bindings so that both
+// say exactly the same thing.
+#pragma once
+
+#include <string>
+
+#include "dsm/map_info.h"
+
+namespace dsm {
+
+/// Version of the description schema. The minor version grows when fields are
+/// added, the major one when a field changes meaning.
+inline constexpr const char* kMapJsonSchemaVersion = "1.1";
+
+/// The description of an open map's header, levels and metadata as a JSON
+/// object (text, indented by `indent` spaces; -1 = one line). `file` is the
+/// name recorded in the "file" field. Metadata that is JSON is embedded as
+/// JSON; other metadata (or JSON nested more than 100 levels deep) as a string.
+std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent = 2);
+
+/// Names used in the description (and by the tools' text output).
+const char* projectionName(Projection projection);
+const char* filterName(PixelFilter filter);
+
+}  // namespace dsm

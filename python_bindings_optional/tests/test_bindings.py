@@ -1,0 +1,117 @@
+"""The bindings against the library's own tools: same descriptions, same
+answers, errors as dsm.Error."""
+import json
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+import dsm
+from conftest import CARDS_SCENE, tool
+
+
+def test_open_exposes_header_levels_and_camera(cards_map):
+    m = dsm.open(cards_map)
+    assert (m.width, m.height, m.channels) == (64, 64, 1)
+    assert [lv["width"] for lv in m.levels] == [64, 32, 16, 8, 4, 2, 1]
+    assert m.levels[0]["tolerance"] == pytest.approx(0.25 / 4)
+    assert m.camera["world_to_light"].shape == (4, 4)
+    assert m.camera["projection"] == "perspective"
+    assert m.metadata["settings"]["spp"] == 16
+
+
+def test_info_equals_dsm_info_json(cards_map):
+    m = dsm.open(cards_map)
+    cli = json.loads(subprocess.run([tool("dsm-info"), "--json", str(cards_map)], check=True,
+                                    capture_output=True, text=True).stdout)
+    assert m.info() == cli
+
+
+def test_pixel_is_a_structured_array_of_the_function(cards_map):
+    m = dsm.open(cards_map)
+    v = m.pixel(32, 32)
+    assert v.dtype.names == ("z", "v", "count", "layer")
+    assert len(v) >= 2
+    assert np.all(np.diff(v["z"]) >= 0)
+    assert np.all(np.diff(v["v"]) <= 0)
+    # The card (opacity 0.5) then the ground: V drops to about 0.5, then to 0.
+    assert v["v"][-1] == pytest.approx(0.0, abs=1e-6)
+    assert np.any(np.abs(v["v"] - 0.5) < 0.1)
+
+
+def test_rgb_pixel_has_three_channels(leaves_map):
+    m = dsm.open(leaves_map)
+    assert m.channels == 3
+    values = m.lookup(np.array([[24.0, 24.0, 1e6]]), space="raster")
+    assert values.shape == (1, 3)
+    found_rgb = False
+    for y in range(0, 48, 4):
+        for x in range(0, 48, 4):
+            v = m.pixel(x, y)
+            if v.dtype.names == ("z", "r", "g", "b", "count", "layer"):
+                found_rgb = True
+    assert found_rgb
+
+
+def test_lookup_matches_single_point_evaluation_of_the_pixel(cards_map):
+    m = dsm.open(cards_map)
+    f = m.pixel(10, 20)
+    depths = np.linspace(0.0, float(f["z"][-1]) * 1.2 + 1.0, 57)
+    points = np.column_stack([np.full_like(depths, 10.5), np.full_like(depths, 20.5), depths])
+    got = m.lookup(points, space="raster", filter_width=1.0, filter="box", level=0)
+    expected = np.interp(depths, f["z"].astype(np.float64), f["v"].astype(np.float64), left=1.0)
+    # np.interp is left-continuous at steps; compare away from vertex depths.
+    away = np.min(np.abs(depths[:, None] - f["z"][None, :]), axis=1) > 1e-4
+    assert np.allclose(got[away], expected[away], atol=1e-6)
+
+
+def test_lookup_error_bounds_and_threads_agree(cards_map):
+    m = dsm.open(cards_map)
+    rng = np.random.default_rng(5)
+    pts = np.column_stack([rng.uniform(0, 64, 20000), rng.uniform(0, 64, 20000), rng.uniform(0, 6, 20000)])
+    one, b1 = m.lookup(pts, space="raster", filter_width=3.0, error_bound=True, threads=1)
+    many, b2 = m.lookup(pts, space="raster", filter_width=3.0, error_bound=True, threads=4)
+    assert np.array_equal(one, many) and np.array_equal(b1, b2)
+    assert np.all(b1 >= m.levels[0]["tolerance"])
+
+
+def test_errors_raise_dsm_error(tmp_path, cards_map):
+    with pytest.raises(dsm.Error, match="missing.dsm"):
+        dsm.open(tmp_path / "missing.dsm")
+    bad = tmp_path / "bad.dsm"
+    bad.write_bytes(b"not a map at all")
+    with pytest.raises(dsm.Error, match="bad.dsm"):
+        dsm.open(bad)
+    m = dsm.open(cards_map)
+    with pytest.raises(dsm.Error):
+        m.pixel(64, 0)
+    with pytest.raises(ValueError):
+        m.lookup(np.zeros((3, 2)))
+    with pytest.raises(ValueError):
+        m.lookup(np.zeros((3, 3)), space="screen")
+    with pytest.raises(TypeError):
+        dsm.build(CARDS_SCENE, tmp_path / "x.dsm", samples=4)
+    with pytest.raises(dsm.Error):
+        dsm.build({"light": {"type": "spot", "up": [0, 0, 1]}, "objects": [{"type": "teapot"}]}, tmp_path / "y.dsm")
+    assert not (tmp_path / "y.dsm").exists()
+
+
+def test_build_returns_statistics_and_validates(tmp_path):
+    out = tmp_path / "b.dsm"
+    stats = dsm.build(CARDS_SCENE, out, resolution=(32, 16), spp=4, mip_levels=1)
+    assert stats["pixels"] == 32 * 16 and stats["file_bytes"] == out.stat().st_size
+    dsm.validate(out)
+    assert len(dsm.open(out).levels) == 1
+
+
+def test_example_script_writes_a_png(tmp_path):
+    import os
+    import pathlib
+    import sys
+    script = pathlib.Path(__file__).parents[1] / "examples" / "hairball_slice.py"
+    out = tmp_path / "hairball.png"
+    env = dict(os.environ)
+    subprocess.run([sys.executable, str(script), "--resolution", "32", "--spp", "1", "-o", str(out)], check=True,
+                   env=env, capture_output=True)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
