@@ -17,6 +17,7 @@
 #include "dsm/compressor.h"
 #include "dsm/error.h"
 #include "dsm/writer.h"
+#include "light_rays.h"
 #include "ray_caster.h"
 #include "text.h"
 
@@ -28,30 +29,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
-
-// SplitMix64: a small, fast generator whose output is the same everywhere,
-// so sample positions depend only on the seed and the pixel.
-class Random {
-public:
-    explicit Random(std::uint64_t seed) : state_(seed) {}
-    std::uint64_t next() {
-        std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
-        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-        z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-        return z ^ (z >> 31);
-    }
-    /// Uniform in [0, 1).
-    double uniform() { return static_cast<double>(next() >> 11) * 0x1p-53; }
-
-private:
-    std::uint64_t state_;
-};
-
-std::uint64_t pixelSeed(std::uint64_t seed, std::uint32_t x, std::uint32_t y) {
-    Random r(seed ^ (std::uint64_t(x) << 32 | y));
-    r.next();
-    return r.next() ^ (std::uint64_t(y) << 32 | x);
-}
 
 // Weight of a sample at offset (dx, dy) pixels from a pixel centre.
 double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
@@ -68,44 +45,6 @@ double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
         }
     }
     return 0.0;
-}
-
-// The light's frame in world space, for generating rays parametrised by depth.
-struct RayFrame {
-    Projection projection;
-    Vec3 origin;                 // projection centre (perspective) or window centre
-    Vec3 right, up, forward;     // light-space axes in world space
-    std::array<double, 4> window;
-    std::uint32_t width, height;
-
-    void ray(double rx, double ry, Vec3& o, Vec3& d) const {
-        const double sx = window[0] + rx / width * (window[1] - window[0]);
-        const double sy = window[3] - ry / height * (window[3] - window[2]);
-        if (projection == Projection::Perspective) {
-            o = origin;
-            for (std::size_t i = 0; i < 3; ++i) d[i] = forward[i] + sx * right[i] + sy * up[i];
-        } else {
-            for (std::size_t i = 0; i < 3; ++i) o[i] = origin[i] + sx * right[i] + sy * up[i];
-            d = forward;
-        }
-    }
-};
-
-RayFrame frameOf(const LightCamera& camera, std::uint32_t width, std::uint32_t height) {
-    // worldToLight is rigid: its rows are the light axes, and its inverse
-    // translation is the projection centre.
-    const auto& m = camera.worldToLight;
-    RayFrame f;
-    f.projection = camera.projection;
-    f.right = {m[0], m[1], m[2]};
-    f.up = {m[4], m[5], m[6]};
-    f.forward = {m[8], m[9], m[10]};
-    const Vec3 t{m[3], m[7], m[11]};
-    for (std::size_t i = 0; i < 3; ++i) f.origin[i] = -(f.right[i] * t[0] + f.up[i] * t[1] + f.forward[i] * t[2]);
-    f.window = camera.screenWindow;
-    f.width = width;
-    f.height = height;
-    return f;
 }
 
 const char* filterName(PixelFilter f) {
@@ -156,7 +95,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
                            " is empty or outside the ", W, "x", H, " image"));
 
     const LightCamera camera = lightCamera(light);
-    const RayFrame frame = frameOf(camera, W, H);
+    const detail::LightRayFrame frame = detail::lightRayFrame(camera, W, H);
     const int channels = scene.isColoured() ? 3 : 1;
     const bool counts = options.counts || options.mtsmLayers > 1;
     const std::uint32_t spp = options.samplesPerPixel;
@@ -210,7 +149,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     // Samples of one sample pixel, generated and cast on demand.
     auto castPixel = [&](std::uint32_t px, std::uint32_t py, std::vector<SampleData>& out, TileStats& stats) {
         const auto start = Clock::now();
-        Random rng(pixelSeed(options.seed, px, py));
+        detail::SplitMix64 rng(detail::pixelSeed(options.seed, px, py));
         std::vector<std::uint32_t> timeSlot(spp);
         for (std::uint32_t k = 0; k < spp; ++k) timeSlot[k] = k;
         for (std::uint32_t k = spp; k > 1; --k) std::swap(timeSlot[k - 1], timeSlot[rng.next() % k]);
