@@ -87,6 +87,26 @@ TEST(DepthShadowMap, PercentageCloserFilteringAveragesAcrossAnEdge) {
     EXPECT_DOUBLE_EQ(map.lookupWorld({5.0, 0.0, kLightZ - 5.0}, 1.0), 1.0);
 }
 
+TEST(DepthShadowMap, SampledFilteringEstimatesTheExactFilter) {
+    const dsm::Scene scene = sceneWith(32, {card(2.0, -100.0, 0.0, 1.0f)});
+    dsm::DepthMapOptions options;
+    options.jitter = false;
+    const auto map = dsm::DepthShadowMap::render(scene, options);
+    // Over many seeds the 4 x 4-sample estimate averages to the exact answer;
+    // one estimate is a multiple of 1/16.
+    double sum = 0.0;
+    const int seeds = 400;
+    for (int s = 0; s < seeds; ++s) {
+        const double v = map.lookupRasterSampled(17.3, 16.0, 5.0, 8.0, 4, s);
+        EXPECT_NEAR(v * 16.0, std::round(v * 16.0), 1e-12);
+        sum += v;
+    }
+    const double exact = map.lookupRaster(17.3, 16.0, 5.0, 8.0);
+    EXPECT_NEAR(sum / seeds, exact, 0.02);
+    EXPECT_EQ(map.lookupRasterSampled(17.3, 16.0, 5.0, 8.0, 4, 7), map.lookupRasterSampled(17.3, 16.0, 5.0, 8.0, 4, 7));
+    EXPECT_DOUBLE_EQ(map.lookupRasterSampled(17.3, 16.0, 1.0, 8.0, 4, 7), 1.0);
+}
+
 TEST(DepthShadowMap, JitteredSamplesEstimateCoverageOfASlantedEdge) {
     // Coverage of an edge through pixel centres' columns at a slant: the
     // fraction of jittered samples shadowed over a wide footprint approaches

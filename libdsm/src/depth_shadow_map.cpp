@@ -82,6 +82,24 @@ double DepthShadowMap::lookupRaster(double rx, double ry, double z, double filte
     return total > 0.0 ? lit / total : 1.0;
 }
 
+double DepthShadowMap::lookupRasterSampled(double rx, double ry, double z, double filterWidth, unsigned grid,
+                                           std::uint64_t seed, double bias) const {
+    if (!std::isfinite(rx) || !std::isfinite(ry) || !std::isfinite(z) || grid == 0) return 1.0;
+    const double width = std::max(1.0, filterWidth), cell = width / grid;
+    const double x0 = rx - 0.5 * width, y0 = ry - 0.5 * width;
+    const double threshold = z - bias;
+    detail::SplitMix64 rng(seed);
+    unsigned lit = 0, inside = 0;
+    for (unsigned j = 0; j < grid; ++j)
+        for (unsigned i = 0; i < grid; ++i) {
+            const double x = x0 + (i + rng.uniform()) * cell, y = y0 + (j + rng.uniform()) * cell;
+            if (x < 0.0 || y < 0.0 || x >= width_ || y >= height_) continue;
+            ++inside;
+            if (depth_[std::size_t(y) * width_ + std::size_t(x)] > threshold) ++lit;
+        }
+    return inside ? double(lit) / inside : 1.0;
+}
+
 double DepthShadowMap::lookupWorld(const Vec3& point, double filterWidth, double bias) const {
     double rx = 0.0, ry = 0.0, z = 0.0;
     if (!camera_.lightToRaster(camera_.worldToLightSpace(point), static_cast<int>(width_), static_cast<int>(height_),

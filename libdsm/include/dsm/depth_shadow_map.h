@@ -55,6 +55,13 @@ public:
     /// with the fraction of their area inside it; pixels outside the image are
     /// left out. Outside the image altogether: lit (1).
     double lookupRaster(double rx, double ry, double z, double filterWidth, double bias = 0.0) const;
+    /// PCF with a fixed number of samples, as renderers filter wide footprints
+    /// (Lokovic & Veach §6 use 8 x 8): the footprint is divided into a
+    /// grid x grid array of cells and one jittered point per cell reads the
+    /// depth pixel under it. Cost is grid^2 whatever the width; the answer is a
+    /// noisy estimate of lookupRaster(). Deterministic for a seed.
+    double lookupRasterSampled(double rx, double ry, double z, double filterWidth, unsigned grid,
+                               std::uint64_t seed, double bias = 0.0) const;
     /// The same at a world-space point.
     double lookupWorld(const Vec3& point, double filterWidth, double bias = 0.0) const;
 
