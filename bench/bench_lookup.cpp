@@ -10,7 +10,7 @@
 //     built with 4, 16 and 64 samples per pixel.
 // The maps are built from a scene (default examples/hairball.json) into a
 // temporary directory before anything is timed. The program prints its tables
-// after the Google Benchmark run; see bench/RESULTS.md.
+// after the Google Benchmark run; see bench/COMPONENTS.md.
 //
 //   bench_lookup [--smoke] [--scene=FILE] [--lookup-size=N] [--lookup-spp=N]
 //                [--pyramid-sizes=N,N] [--pyramid-spp=N,N,N] [--keep-maps]
