@@ -31,6 +31,8 @@
 #include <fstream>
 #include <iterator>
 #include <memory>
+#include <mutex>
+#include <span>
 #include <string>
 #include <utility>
 #include <variant>
@@ -659,6 +661,36 @@ TEST(SamplerAccuracy, RegionMatchesFullBuild) {
         }
     EXPECT_EQ(mapHalf->info().levels.at(0).vertexCount, rightVertices);
     EXPECT_EQ(mapHalf->info().levels.at(0).nonEmptyPixels, std::uint64_t(size / 2) * size);
+}
+
+}  // namespace
+
+namespace {
+
+TEST(SamplerRawSamples, EveryPixelOfTheRegionReceivesItsRaysOnce) {
+    TempDir dir;
+    const dsm::Scene scene = sceneWith(orthoLight(16), {wall(3.0, {0.4f, 0.4f, 0.4f})});
+    dsm::BuildOptions options = boxOptions(9, 0.0);
+    options.region = {2, 3, 13, 11};
+    std::mutex mutex;
+    std::vector<int> calls(16 * 16, 0);
+    bool raysAsExpected = true;
+    options.sampleRays = [&](std::uint32_t x, std::uint32_t y, std::span<const dsm::SampleRay> rays) {
+        std::lock_guard<std::mutex> lock(mutex);
+        ++calls[y * 16 + x];
+        if (rays.size() != 9) raysAsExpected = false;
+        for (const dsm::SampleRay& r : rays)
+            if (r.hits.size() != 1 || std::abs(r.hits[0].z - 3.0f) > 1e-5f || r.hits[0].opacity[0] != 0.4f ||
+                !r.volume.empty())
+                raysAsExpected = false;
+    };
+    dsm::buildMap(scene, options, (dir / "raw.dsm").string());
+    EXPECT_TRUE(raysAsExpected);
+    for (std::uint32_t y = 0; y < 16; ++y)
+        for (std::uint32_t x = 0; x < 16; ++x) {
+            const bool inside = x >= 2 && x < 13 && y >= 3 && y < 11;
+            EXPECT_EQ(calls[y * 16 + x], inside ? 1 : 0) << x << "," << y;
+        }
 }
 
 }  // namespace

@@ -207,8 +207,15 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             for (std::uint32_t x = sx0; x < sx1; ++x) {
                 auto& s = samples[std::size_t(y - sy0) * sw + (x - sx0)];
                 castPixel(x, y, s, stats);
-                if (x >= rx0 && x < rx1 && y >= ry0 && y < ry1)
+                if (x >= rx0 && x < rx1 && y >= ry0 && y < ry1) {
                     for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
+                    if (options.sampleRays) {
+                        std::vector<SampleRay> own;
+                        own.reserve(s.size());
+                        for (const SampleData& d : s) own.push_back({d.hits, d.volume});
+                        options.sampleRays(x, y, own);
+                    }
+                }
             }
         std::vector<SampleRay> rays;
         std::vector<double> weights;

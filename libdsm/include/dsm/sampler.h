@@ -5,10 +5,12 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <span>
 #include <string>
 
 #include "dsm/map_info.h"
 #include "dsm/scene.h"
+#include "dsm/transmittance.h"
 
 namespace dsm {
 
@@ -44,6 +46,12 @@ struct BuildOptions {
     int zlibLevel = 6;
     /// Called now and then with the fraction done, from the calling thread.
     std::function<void(double)> progress;
+    /// Receives the sample rays of each built pixel (x, y) before filtering:
+    /// the raw data a deep image would hold (each ray's hits and volume
+    /// samples, in no particular order within a ray). Called once per pixel of
+    /// the region, from worker threads, in no particular order: it must be
+    /// thread-safe. The spans are valid during the call only.
+    std::function<void(std::uint32_t x, std::uint32_t y, std::span<const SampleRay> rays)> sampleRays;
 };
 
 struct BuildStats {
