@@ -135,6 +135,8 @@ int main(int argc, char** argv) {
         report["deep_vs_normal"] = studyDeepVersusNormal(config, loaded[0], first);
         std::printf("filter width: %s\n", first.c_str());
         report["filter_width"] = studyFilterWidth(config, loaded[0], first);
+        std::printf("storage against OpenEXR deep: %s\n", first.c_str());
+        report["storage"] = studyStorage(config, loaded[0], first);
         std::printf("cache budget: %s\n", first.c_str());
         report["cache_budget"] = studyCacheBudget(config, loaded[0], first);
         report["total_seconds"] =

@@ -85,6 +85,7 @@ std::filesystem::path gridMapPath(const Config& config, const std::string& scene
 Json studyToleranceAndSpp(const Config& config, const Scene& scene, const std::string& name);
 Json studyDeepVersusNormal(const Config& config, const Scene& scene, const std::string& name);
 Json studyFilterWidth(const Config& config, const Scene& scene, const std::string& name);
+Json studyStorage(const Config& config, const Scene& scene, const std::string& name);
 Json studyCacheBudget(const Config& config, const Scene& scene, const std::string& name);
 
 }  // namespace dsm::trade
