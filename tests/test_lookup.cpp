@@ -286,6 +286,28 @@ TEST(LookupLevelZero, BoxOfWidthOneIsBilinearBetweenTheFourNearestCentres) {
     }
 }
 
+TEST(LookupLevelZero, HugeFootprintsCoverTheImageWithoutBlowingUp) {
+    // A box far wider than the image at level 0 weighs every pixel equally:
+    // the plain mean of the image, whatever the width (up to 1e300) and even
+    // from far outside the image's raster.
+    const auto m = randomRgbMap();
+    const LevelZero ref(m->image);
+    LookupContext ctx(m->map);
+    const double z = 2.5;
+    std::array<double, 3> mean{0, 0, 0};
+    for (std::uint32_t y = 0; y < 17; ++y)
+        for (std::uint32_t x = 0; x < 23; ++x)
+            for (int c = 0; c < 3; ++c) mean[static_cast<std::size_t>(c)] += ref.value(x, y, z, c) / (23.0 * 17.0);
+    for (double width : {1e4, 1e9, 1e300}) {
+        LookupOptions o;
+        o.filterWidth = width;
+        o.level = 0;
+        const LookupResult r = ctx.raster(11.0, 8.0, z, o);
+        EXPECT_EQ(r.pixelsUsed, 23 * 17) << width;
+        for (std::size_t c = 0; c < 3; ++c) EXPECT_NEAR(r.v[c], mean[c], 1e-9) << width;
+    }
+}
+
 TEST(LookupLevelZero, KernelsMatchTheDocumentedFormulasAtSeveralWidths) {
     const auto m = randomRgbMap();
     const LevelZero ref(m->image);

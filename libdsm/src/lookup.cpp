@@ -26,10 +26,13 @@ double minimumWidth(PixelFilter filter) { return filter == PixelFilter::Box ? 1.
 
 // Weights along one axis for a footprint of width w (pixels of this level)
 // centred at c, over pixel centres i + 0.5.
-void axisWeights(PixelFilter filter, double c, double w, AxisWeights& out) {
+void axisWeights(PixelFilter filter, double c, double w, std::uint32_t extent, AxisWeights& out) {
     const double r = 0.5 * w;
-    out.first = static_cast<long>(std::floor(c - r - 0.5));
-    const long last = static_cast<long>(std::ceil(c + r - 0.5));
+    // Pixels outside [0, extent) are left out by the caller anyway: clipping
+    // here (in double, before converting) bounds the work and the conversion
+    // for any width and position.
+    out.first = static_cast<long>(std::clamp(std::floor(c - r - 0.5), -1.0, static_cast<double>(extent)));
+    const long last = static_cast<long>(std::clamp(std::ceil(c + r - 0.5), -1.0, static_cast<double>(extent)));
     out.weights.clear();
     for (long i = out.first; i <= last; ++i) {
         const double d = (static_cast<double>(i) + 0.5) - c;
@@ -94,8 +97,8 @@ struct LookupContext::Impl {
                        double out[3], int& pixelsUsed) {
         const LevelInfo& L = reader->info.levels[level];
         const double scale = std::ldexp(1.0, -static_cast<int>(level));
-        axisWeights(filter, rx * scale, width, wx);
-        axisWeights(filter, ry * scale, width, wy);
+        axisWeights(filter, rx * scale, width, L.width, wx);
+        axisWeights(filter, ry * scale, width, L.height, wy);
         const std::uint32_t T = reader->info.tileSize;
         double total = 0.0;
         out[0] = out[1] = out[2] = 0.0;

@@ -1,0 +1,769 @@
+# Runs dsm-lookup and checks one behaviour.
+#
+#   cmake -DCHECK=<check> -DDSM_LOOKUP=<dsm-lookup> -DMAKE_SAMPLE_MAP=<make_sample_map>
+#         -DLOOKUP_REFERENCE=<lookup_reference> [-DPYTHON=<python3>]
+#         -DWORK_DIR=<fresh dir> -DVERSION=<project version> -P check_dsm_lookup.cmake
+#
+# Two maps:
+#  - mono.dsm (lookup_reference --write-mono): 8 x 8, tiles of 4, 2 levels,
+#    exact (tolerance 0), orthographic, light = world + (1, -2, 0.5), raster =
+#    (lx, 8 - ly). Pixel (i, j): V = 1 up to z = 1, linear down to k/16 at
+#    z = 2, then k/16, with k = (5i + 3j + ij) % 16. Its answers are computed
+#    here from that formula (all are dyadic fractions, printed exactly by %.9g).
+#  - rgb.dsm (make_sample_map): 48 x 32 RGB, perspective, tolerance 0.01.
+#    Its answers are compared with lookup_reference, which prints what
+#    dsm::LookupContext returns, and at a few pixels with the values
+#    make_sample_map writes.
+cmake_minimum_required(VERSION 3.25)
+
+foreach(var CHECK DSM_LOOKUP MAKE_SAMPLE_MAP LOOKUP_REFERENCE WORK_DIR VERSION)
+  if(NOT DEFINED ${var})
+    message(FATAL_ERROR "check_dsm_lookup.cmake: -D${var}=... is required")
+  endif()
+endforeach()
+
+include("${CMAKE_CURRENT_LIST_DIR}/check_common.cmake")
+
+# run(args...): runs dsm-lookup; sets RC, OUT, ERR and LAST_COMMAND in the caller.
+function(run)
+  run_tool("${DSM_LOOKUP}" dsm-lookup ${ARGN})
+endfunction()
+
+# run_with_input(file args...): the same with standard input from a file.
+function(run_with_input input)
+  execute_process(COMMAND "${DSM_LOOKUP}" ${ARGN} INPUT_FILE "${input}"
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  set(RC "${rc}" PARENT_SCOPE)
+  set(OUT "${out}" PARENT_SCOPE)
+  set(ERR "${err}" PARENT_SCOPE)
+  set(LAST_COMMAND "dsm-lookup ${ARGN} < ${input}" PARENT_SCOPE)
+endfunction()
+
+# query(text args...): dsm-lookup ARGS --input <file holding text>.
+set(_query_count 0)
+function(query text)
+  math(EXPR n "${_query_count} + 1")
+  set(_query_count ${n} PARENT_SCOPE)
+  set(file "${WORK_DIR}/queries_${n}.txt")
+  file(WRITE "${file}" "${text}")
+  execute_process(COMMAND "${DSM_LOOKUP}" ${ARGN} --input "${file}"
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  set(RC "${rc}" PARENT_SCOPE)
+  set(OUT "${out}" PARENT_SCOPE)
+  set(ERR "${err}" PARENT_SCOPE)
+  set(LAST_COMMAND "dsm-lookup ${ARGN} --input ${file}" PARENT_SCOPE)
+endfunction()
+
+# reference(map space filter width level bias text): lookup_reference's answers to the points in text.
+function(reference map space filter width level bias text)
+  set(file "${WORK_DIR}/reference_points.txt")
+  file(WRITE "${file}" "${text}")
+  execute_process(COMMAND "${LOOKUP_REFERENCE}" "${map}" ${space} ${filter} ${width} ${level} ${bias}
+    INPUT_FILE "${file}" RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "lookup_reference failed (${rc}): ${err}")
+  endif()
+  set(REFERENCE "${out}" PARENT_SCOPE)
+endfunction()
+
+function(expect_not_contains var text)
+  string(FIND "${${var}}" "${text}" at)
+  if(NOT at EQUAL -1)
+    fail("expected ${var} not to contain '${text}'")
+  endif()
+endfunction()
+
+function(expect_equal var expected)
+  if(NOT "${${var}}" STREQUAL "${expected}")
+    fail("expected ${var} to be exactly:\n${expected}")
+  endif()
+endfunction()
+
+# Number of lines (newline characters) in a variable's value.
+function(line_count var result)
+  string(REGEX MATCHALL "\n" newlines "${${var}}")
+  list(LENGTH newlines n)
+  set(${result} ${n} PARENT_SCOPE)
+endfunction()
+
+function(expect_lines var expected)
+  line_count(${var} n)
+  if(NOT n EQUAL expected)
+    fail("expected ${expected} lines in ${var}, found ${n}")
+  endif()
+endfunction()
+
+# One error line on stderr in the tools' format: "dsm-lookup: ERROR '<file>': ...".
+function(expect_one_error_line file)
+  expect_lines(ERR 1)
+  string(FIND "${ERR}" "dsm-lookup: ERROR '${file}': " at)
+  if(NOT at EQUAL 0)
+    fail("expected stderr to start with \"dsm-lookup: ERROR '${file}': \"")
+  endif()
+endfunction()
+
+# ---------------------------------------------------------------------------
+# The mono map's values, from its formula
+
+# k(i, j) of the mono map.
+function(mono_k i j out)
+  math(EXPR k "(5 * ${i} + 3 * ${j} + ${i} * ${j}) % 16")
+  set(${out} ${k} PARENT_SCOPE)
+endfunction()
+
+# numerator / denominator (a power of two up to 256) as %.9g prints it.
+function(fraction_text numerator denominator out)
+  math(EXPR scaled "${numerator} * (100000000 / ${denominator})")
+  math(EXPR whole "${scaled} / 100000000")
+  math(EXPR part "${scaled} % 100000000")
+  if(part EQUAL 0)
+    set(${out} "${whole}" PARENT_SCOPE)
+    return()
+  endif()
+  string(LENGTH "${part}" digits)
+  math(EXPR pad "8 - ${digits}")
+  string(REPEAT "0" ${pad} zeros)
+  string(REGEX REPLACE "0+$" "" part "${zeros}${part}")
+  set(${out} "${whole}.${part}" PARENT_SCOPE)
+endfunction()
+
+# The centre of pixel (i, j) at light depth z ("3", "1.5") in a space, as "x y z".
+function(mono_point space i j z out)
+  if(space STREQUAL "raster")
+    set(p "${i}.5 ${j}.5 ${z}")
+  elseif(space STREQUAL "light")
+    math(EXPR ly "7 - ${j}")
+    set(p "${i}.5 ${ly}.5 ${z}")
+  else()  # world = light - (1, -2, 0.5)
+    if(i EQUAL 0)
+      set(wx "-0.5")
+    else()
+      math(EXPR wx "${i} - 1")
+      set(wx "${wx}.5")
+    endif()
+    math(EXPR wy "9 - ${j}")
+    # z - 0.5 for the depths used here (3 -> 2.5, 1.5 -> 1, 0.5 -> 0, 2 -> 1.5)
+    set(wz_3 "2.5")
+    set(wz_1.5 "1")
+    set(wz_0.5 "0")
+    set(wz_2 "1.5")
+    set(p "${wx} ${wy}.5 ${wz_${z}}")
+  endif()
+  set(${out} "${p}" PARENT_SCOPE)
+endfunction()
+
+# Box filter of width 2 (or triangle of width 4) at the centre of interior
+# pixel (i, j), z past the vertices: weights 1 2 1 on each axis, / 16 / 16.
+function(mono_smoothed i j out)
+  set(sum 0)
+  foreach(dj -1 0 1)
+    foreach(di -1 0 1)
+      math(EXPR x "${i} + ${di}")
+      math(EXPR y "${j} + ${dj}")
+      mono_k(${x} ${y} k)
+      math(EXPR w "(2 - ${di} * ${di}) * (2 - ${dj} * ${dj})")
+      math(EXPR sum "${sum} + ${w} * ${k}")
+    endforeach()
+  endforeach()
+  fraction_text(${sum} 256 text)
+  set(${out} "${text}" PARENT_SCOPE)
+endfunction()
+
+# Level-1 pixel (I, J): the mean of its four level-0 pixels.
+function(mono_level1 I J out)
+  set(sum 0)
+  foreach(dj 0 1)
+    foreach(di 0 1)
+      math(EXPR x "2 * ${I} + ${di}")
+      math(EXPR y "2 * ${J} + ${dj}")
+      mono_k(${x} ${y} k)
+      math(EXPR sum "${sum} + ${k}")
+    endforeach()
+  endforeach()
+  fraction_text(${sum} 64 text)
+  set(${out} "${text}" PARENT_SCOPE)
+endfunction()
+
+# Every pixel centre of the mono map at depth z in a space: POINTS (one per
+# line) and VALUES (k/16 past the vertices, (16 + k)/32 halfway, 1 before).
+function(mono_all_pixels space z)
+  set(points "")
+  set(values "")
+  foreach(j RANGE 7)
+    foreach(i RANGE 7)
+      mono_point(${space} ${i} ${j} ${z} p)
+      mono_k(${i} ${j} k)
+      if(z STREQUAL "3")
+        fraction_text(${k} 16 v)
+      elseif(z STREQUAL "1.5")
+        math(EXPR n "16 + ${k}")
+        fraction_text(${n} 32 v)
+      else()
+        set(v 1)
+      endif()
+      string(APPEND points "${p}\n")
+      string(APPEND values "${v}\n")
+    endforeach()
+  endforeach()
+  set(POINTS "${points}" PARENT_SCOPE)
+  set(VALUES "${values}" PARENT_SCOPE)
+endfunction()
+
+# ---------------------------------------------------------------------------
+# Fresh maps
+
+file(REMOVE_RECURSE "${WORK_DIR}")
+file(MAKE_DIRECTORY "${WORK_DIR}")
+set(MONO "${WORK_DIR}/mono.dsm")
+set(RGB "${WORK_DIR}/rgb.dsm")
+execute_process(COMMAND "${LOOKUP_REFERENCE}" --write-mono "${MONO}" RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "lookup_reference --write-mono failed (${rc}): ${err}")
+endif()
+execute_process(COMMAND "${MAKE_SAMPLE_MAP}" "${RGB}" RESULT_VARIABLE rc ERROR_VARIABLE err)
+if(NOT rc EQUAL 0)
+  message(FATAL_ERROR "make_sample_map failed (${rc}): ${err}")
+endif()
+
+# ---------------------------------------------------------------------------
+# Checks
+
+if(CHECK STREQUAL "known_values")
+  # Level 0, a box of one pixel at pixel centres: each pixel's own function,
+  # before, on and after its ramp.
+  foreach(z 3 1.5 0.5)
+    mono_all_pixels(raster ${z})
+    query("${POINTS}" "${MONO}" --space raster --level 0)
+    expect_rc(0)
+    expect_empty(ERR)
+    expect_equal(OUT "${VALUES}")
+  endforeach()
+
+elseif(CHECK STREQUAL "spaces")
+  # The same pixel centres named in world, light and raster space (world is the default).
+  foreach(space world light raster)
+    mono_all_pixels(${space} 3)
+    if(space STREQUAL "world")
+      query("${POINTS}" "${MONO}" --level 0)
+    else()
+      query("${POINTS}" "${MONO}" --space ${space} --level 0)
+    endif()
+    expect_rc(0)
+    expect_empty(ERR)
+    expect_equal(OUT "${VALUES}")
+  endforeach()
+  # The world point of pixel (2, 5) read as light or raster coordinates is elsewhere.
+  mono_point(world 2 5 3 p)
+  mono_k(2 5 k)
+  fraction_text(${k} 16 expected)
+  query("${p}\n" "${MONO}" --level 0 --space world)
+  expect_equal(OUT "${expected}\n")
+  query("${p}\n" "${MONO}" --level 0 --space light)
+  if("${OUT}" STREQUAL "${expected}\n")
+    fail("light space gave the world-space answer")
+  endif()
+  # Outside the raster (and, for a perspective map, behind the light) is lit.
+  query("-0.5 4 3\n8.5 4 3\n4 9 3\n" "${MONO}" --space raster)
+  expect_equal(OUT "1\n1\n1\n")
+  query("0 0 -1\n" "${RGB}" --space light)
+  expect_equal(OUT "1,1,1\n")
+
+elseif(CHECK STREQUAL "filters")
+  set(points "")
+  set(smoothed "")
+  set(own "")
+  foreach(j 1 3 6)
+    foreach(i 1 2 5 6)
+      mono_point(raster ${i} ${j} 3 p)
+      string(APPEND points "${p}\n")
+      mono_smoothed(${i} ${j} v)
+      string(APPEND smoothed "${v}\n")
+      mono_k(${i} ${j} k)
+      fraction_text(${k} 16 v)
+      string(APPEND own "${v}\n")
+    endforeach()
+  endforeach()
+  # Default filter: box; width 1 is bilinear, exact at pixel centres.
+  query("${points}" "${MONO}" -s raster -l 0)
+  expect_equal(OUT "${own}")
+  query("${points}" "${MONO}" -s raster -l 0 --filter box --filter-width 2)
+  expect_equal(OUT "${smoothed}")
+  # A triangle of width 2 reaches no neighbour centre; of width 4, weights 1 2 1 like the box of 2.
+  query("${points}" "${MONO}" -s raster -l 0 --filter triangle --filter-width 2)
+  expect_equal(OUT "${own}")
+  query("${points}" "${MONO}" -s raster -l 0 --filter triangle -w 4)
+  expect_equal(OUT "${smoothed}")
+  # A narrower width is raised to the filter's smallest (lookup.h).
+  query("${points}" "${MONO}" -s raster -l 0 --filter triangle -w 0.5)
+  expect_equal(OUT "${own}")
+  # The gaussian: the library's answer, different from both.
+  query("${points}" "${MONO}" -s raster -l 0 --filter gaussian -w 4)
+  set(gaussian "${OUT}")
+  reference("${MONO}" raster gaussian 4 0 0 "${points}")
+  string(REGEX REPLACE ",[^,\n]*\n" "\n" expected "${REFERENCE}")  # drop the error bound column
+  expect_equal(OUT "${expected}")
+  if(gaussian STREQUAL smoothed OR gaussian STREQUAL own)
+    fail("the gaussian filter gave the same answers as the box")
+  endif()
+
+elseif(CHECK STREQUAL "levels")
+  set(points "")
+  set(level1 "")
+  foreach(J 0 1 3)
+    foreach(I 0 1 2 3)
+      math(EXPR x "2 * ${I} + 1")
+      math(EXPR y "2 * ${J} + 1")
+      string(APPEND points "${x} ${y} 3\n")
+      mono_level1(${I} ${J} v)
+      string(APPEND level1 "${v}\n")
+    endforeach()
+  endforeach()
+  # Level 1 alone: a one-pixel box there covers one level-1 pixel.
+  query("${points}" "${MONO}" -s raster --level 1)
+  expect_equal(OUT "${level1}")
+  # Beyond the coarsest level: clamped to it.
+  query("${points}" "${MONO}" -s raster --level 7)
+  expect_equal(OUT "${level1}")
+  # auto with a 2-pixel box picks level 1 (footprint 1 pixel there) ...
+  query("${points}" "${MONO}" -s raster --level auto -w 2)
+  expect_equal(OUT "${level1}")
+  # Level 0 with a 2-pixel box at the same points covers the same four
+  # level-0 pixels: the pyramid holds their exact mean.
+  query("${points}" "${MONO}" -s raster --level 0 -w 2)
+  expect_equal(OUT "${level1}")
+  # At level-0 pixel centres, level 0 gives each pixel's own value and level 1
+  # a mix of level-1 pixels (the library's answer), not the same.
+  mono_all_pixels(raster 3)
+  query("${POINTS}" "${MONO}" -s raster --level 0)
+  expect_equal(OUT "${VALUES}")
+  query("${POINTS}" "${MONO}" -s raster --level 1)
+  reference("${MONO}" raster box 1 1 0 "${POINTS}")
+  string(REGEX REPLACE ",[^,\n]*\n" "\n" expected "${REFERENCE}")
+  expect_equal(OUT "${expected}")
+  if(OUT STREQUAL VALUES)
+    fail("--level 1 gave the level-0 answers")
+  endif()
+  # auto between levels blends them: the library's answer.
+  query("${points}" "${MONO}" -s raster -w 1.5)
+  reference("${MONO}" raster box 1.5 -1 0 "${points}")
+  string(REGEX REPLACE ",[^,\n]*\n" "\n" expected "${REFERENCE}")
+  expect_equal(OUT "${expected}")
+
+elseif(CHECK STREQUAL "bias")
+  # Depth 2 minus a bias of 0.5 is halfway down the ramp; a negative bias moves past it.
+  set(points "")
+  set(halfway "")
+  set(after "")
+  foreach(p "0 0" "3 4" "7 7" "5 2")
+    string(REPLACE " " ";" ij "${p}")
+    list(GET ij 0 i)
+    list(GET ij 1 j)
+    string(APPEND points "${i}.5 ${j}.5 2\n")
+    mono_k(${i} ${j} k)
+    math(EXPR n "16 + ${k}")
+    fraction_text(${n} 32 v)
+    string(APPEND halfway "${v}\n")
+    fraction_text(${k} 16 v)
+    string(APPEND after "${v}\n")
+  endforeach()
+  query("${points}" "${MONO}" -s raster -l 0 --bias 0.5)
+  expect_equal(OUT "${halfway}")
+  query("${points}" "${MONO}" -s raster -l 0 --bias=-0.5)
+  expect_equal(OUT "${after}")
+  query("${points}" "${MONO}" -s raster -l 0 -b 0)
+  expect_equal(OUT "${after}")
+
+elseif(CHECK STREQUAL "error_bound")
+  # rgb.dsm records error bounds 0.01 (level 0) and 0.015 (level 1); a blend
+  # reports the larger; a lit point outside the map, 0.
+  set(p "10.5 3.5 5\n")
+  query("${p}" "${RGB}" -s raster -l 0 --error-bound)
+  expect_matches(OUT "^[^,]+,[^,]+,[^,]+,0\\.01\n$")
+  query("${p}" "${RGB}" -s raster -l 1 -e)
+  expect_matches(OUT "^[^,]+,[^,]+,[^,]+,0\\.015\n$")
+  query("${p}" "${RGB}" -s raster -w 1.5 -e)
+  expect_matches(OUT "^[^,]+,[^,]+,[^,]+,0\\.015\n$")
+  query("-5 3.5 5\n" "${RGB}" -s raster -e)
+  expect_equal(OUT "1,1,1,0\n")
+  query("${p}" "${RGB}" -s raster -l 0)
+  expect_matches(OUT "^[^,]+,[^,]+,[^,]+\n$")
+  query("${p}" "${RGB}" -s raster -l 1 -e --format json)
+  expect_contains(OUT "\"error_bound\":0.015}")
+
+elseif(CHECK STREQUAL "rgb")
+  # make_sample_map's pixel (10, 3): one vertex (0.75, 0.5, 0.25) at z = 1.03;
+  # (10, 5): three, ending at (0.75^3, 0.5^3, 0.25^3); (10, 4): empty.
+  query("10.5 3.5 5\n10.5 3.5 0.5\n10.5 5.5 5\n10.5 4.5 5\n" "${RGB}" -s raster -l 0)
+  expect_rc(0)
+  expect_empty(ERR)
+  expect_equal(OUT "0.75,0.5,0.25\n1,1,1\n0.421875,0.125,0.015625\n1,1,1\n")
+  query("10.5 5.5 5\n" "${RGB}" -s raster -l 0 --header)
+  expect_equal(OUT "r,g,b\n0.421875,0.125,0.015625\n")
+
+elseif(CHECK STREQUAL "library")
+  # Every combination below against dsm::LookupContext on the same points.
+  set(world_points "")
+  foreach(z -1.5 -0.97 -0.5 0.3 1.5)
+    foreach(x -1.2 -0.7 -0.5 -0.31 0.1)
+      foreach(y -0.2 0.1 0.3 0.6)
+        string(APPEND world_points "${x} ${y} ${z}\n")
+      endforeach()
+    endforeach()
+  endforeach()
+  set(raster_points "")
+  foreach(z 0.5 1.02 1.2 2 3.3)
+    foreach(x 0 3.3 10.5 25.01 47.9 48.5)
+      foreach(y 0.2 5.5 16 31.9)
+        string(APPEND raster_points "${x} ${y} ${z}\n")
+      endforeach()
+    endforeach()
+  endforeach()
+  foreach(setup
+      "world;box;1;-1;0" "world;gaussian;3;-1;0" "world;triangle;2.5;0;0.05"
+      "light;triangle;2.5;0;0" "light;box;5;-1;0"
+      "raster;box;1.5;-1;0" "raster;gaussian;6;1;0.1" "raster;triangle;3;-1;-0.2")
+    list(GET setup 0 space)
+    list(GET setup 1 filter)
+    list(GET setup 2 width)
+    list(GET setup 3 level)
+    list(GET setup 4 bias)
+    if(space STREQUAL "raster")
+      set(points "${raster_points}")
+    else()
+      set(points "${world_points}")
+    endif()
+    if(level EQUAL -1)
+      set(level_text auto)
+    else()
+      set(level_text ${level})
+    endif()
+    query("${points}" "${RGB}" --space ${space} --filter ${filter} --filter-width ${width} --level ${level_text}
+          --bias=${bias} --error-bound)
+    expect_rc(0)
+    expect_empty(ERR)
+    reference("${RGB}" ${space} ${filter} ${width} ${level} ${bias} "${points}")
+    expect_equal(OUT "${REFERENCE}")
+    # Not all lit: the points do reach into the shadows.
+    string(REGEX MATCHALL "\n1,1,1," lit "\n${OUT}")
+    list(LENGTH lit n)
+    line_count(OUT total)
+    if(n EQUAL total)
+      fail("every answer is 1: the points miss the map")
+    endif()
+  endforeach()
+
+elseif(CHECK STREQUAL "json")
+  query("# a comment\n\n1.5 2.5 3\n" "${MONO}" -s raster -l 0 --format json)
+  expect_rc(0)
+  mono_k(1 2 k)
+  fraction_text(${k} 16 v)
+  expect_equal(OUT "{\"line\":3,\"v\":${v}}\n")
+  query("10.5 3.5 5\n  # indented comment\n10.5 5.5 5 # trailing comment\n" "${RGB}" -s raster -l 0
+        --format json -e)
+  expect_rc(0)
+  expect_lines(OUT 2)
+  string(REGEX MATCHALL "[^\n]+" objects "${OUT}")
+  list(GET objects 0 first)
+  list(GET objects 1 second)
+  json_expect("${first}" 1 line)
+  json_expect("${first}" 0.75 r)
+  json_expect("${first}" 0.5 g)
+  json_expect("${first}" 0.25 b)
+  json_expect("${first}" 0.01 error_bound)
+  json_expect("${second}" 3 line)
+  json_expect("${second}" 0.125 g)
+  run("${MONO}" --format json -s raster -l 0 --point 1.5,2.5,3 --point 0.5,0.5,0)
+  expect_rc(0)
+  expect_equal(OUT "{\"point\":1,\"v\":${v}}\n{\"point\":2,\"v\":1}\n")
+
+elseif(CHECK STREQUAL "header")
+  query("1.5 2.5 3\n" "${MONO}" -s raster --header)
+  expect_rc(0)
+  expect_matches(OUT "^v\n[0-9.]+\n$")
+  query("1.5 2.5 3\n" "${MONO}" -s raster --header --error-bound)
+  expect_matches(OUT "^v,error_bound\n[0-9.]+,[0-9.e-]+\n$")
+  query("10.5 3.5 5\n" "${RGB}" -s raster --header -e)
+  expect_matches(OUT "^r,g,b,error_bound\n")
+  query("1.5 2.5 3\n" "${MONO}" --header --format json)
+  expect_rc(2)
+  expect_empty(OUT)
+
+elseif(CHECK STREQUAL "bad_line" OR CHECK STREQUAL "strict")
+  string(REPEAT "1" 5000 long)
+  set(text "1.5 2.5 3\n1 2\nx 2 3\n0.5 0.5 0\n1 2 3 4\nnan 1 2\n${long} 1 1\n2.5,1.5,3\r\n1 1e999 1\n")
+  mono_k(1 2 a)
+  mono_k(2 1 b)
+  fraction_text(${a} 16 va)
+  fraction_text(${b} 16 vb)
+  set(input "${WORK_DIR}/bad.txt")
+  file(WRITE "${input}" "${text}")
+  if(CHECK STREQUAL "bad_line")
+    # Every query gets an answer line; the bad ones nan, and a complaint naming the line.
+    run("${MONO}" -s raster -l 0 --input "${input}")
+    expect_rc(1)
+    expect_equal(OUT "${va}\nnan\nnan\n1\nnan\nnan\nnan\n${vb}\nnan\n")
+    expect_lines(ERR 6)
+    foreach(n 2 3 5 6 7 9)
+      expect_contains(ERR "dsm-lookup: ERROR '${input}' line ${n}: ")
+    endforeach()
+    expect_contains(ERR "line 2: expected 3 numbers (x y z), found 2 fields\n")
+    expect_contains(ERR "line 3: x 'x' is not a finite number\n")
+    expect_contains(ERR "line 5: expected 3 numbers (x y z), found 4 fields\n")
+    expect_contains(ERR "line 6: x 'nan' is not a finite number\n")
+    expect_contains(ERR "line 7: longer than 4096 bytes\n")
+    expect_contains(ERR "line 9: y '1e999' is not a finite number\n")
+    # RGB: nan in every column; JSON: the line and the problem.
+    run("${RGB}" -e --input "${input}")
+    expect_rc(1)
+    expect_matches(OUT "^[^\n]+\nnan,nan,nan,nan\nnan,nan,nan,nan\n")
+    run("${MONO}" -s raster -l 0 --format json --input "${input}")
+    expect_rc(1)
+    string(REGEX MATCHALL "[^\n]+" objects "${OUT}")
+    list(LENGTH objects n)
+    if(NOT n EQUAL 9)
+      fail("expected 9 JSON lines")
+    endif()
+    list(GET objects 1 second)
+    json_expect("${second}" 2 line)
+    json_expect("${second}" "expected 3 numbers (x y z), found 2 fields" error)
+    list(GET objects 7 eighth)
+    json_expect("${eighth}" 8 line)
+    json_expect("${eighth}" ${vb} v)
+  else()
+    # --strict: stop at the first bad line, after its answer line.
+    run("${MONO}" -s raster -l 0 --strict --input "${input}")
+    expect_rc(1)
+    expect_equal(OUT "${va}\nnan\n")
+    expect_lines(ERR 1)
+    expect_contains(ERR "dsm-lookup: ERROR '${input}' line 2: ")
+    # A clean input passes under --strict.
+    query("1.5 2.5 3\n" "${MONO}" -s raster -l 0 --strict)
+    expect_rc(0)
+    expect_equal(OUT "${va}\n")
+  endif()
+
+elseif(CHECK STREQUAL "stdin")
+  mono_all_pixels(world 3)
+  set(input "${WORK_DIR}/queries.txt")
+  file(WRITE "${input}" "${POINTS}")
+  run_with_input("${input}" "${MONO}" -l 0)
+  expect_rc(0)
+  expect_empty(ERR)
+  expect_equal(OUT "${VALUES}")
+  run_with_input("${input}" "${MONO}" -l 0 --input -)
+  expect_rc(0)
+  expect_equal(OUT "${VALUES}")
+  # Bad lines on standard input are named '<stdin>'.
+  file(WRITE "${input}" "1 2\n")
+  run_with_input("${input}" "${MONO}")
+  expect_rc(1)
+  expect_equal(OUT "nan\n")
+  expect_equal(ERR "dsm-lookup: ERROR '<stdin>' line 1: expected 3 numbers (x y z), found 2 fields\n")
+  # The map itself from standard input, queries from a file.
+  file(WRITE "${input}" "${POINTS}")
+  run_with_input("${MONO}" - -l 0 --input "${input}")
+  expect_rc(0)
+  expect_equal(OUT "${VALUES}")
+  # ... but not both from standard input.
+  run_with_input("${MONO}" - -l 0)
+  expect_rc(2)
+  expect_contains(ERR "cannot both come from standard input")
+  # A broken map on standard input is named '<stdin>'.
+  run_with_input("${input}" - --input "${input}")
+  expect_rc(1)
+  expect_one_error_line("<stdin>")
+  expect_contains(ERR "not a deep shadow map")
+  # No queries at all: no output, success.
+  file(WRITE "${input}" "")
+  run_with_input("${input}" "${MONO}")
+  expect_rc(0)
+  expect_empty(OUT)
+
+elseif(CHECK STREQUAL "points")
+  mono_k(1 2 a)
+  fraction_text(${a} 16 va)
+  run("${MONO}" -s raster -l 0 --point 1.5,2.5,3)
+  expect_rc(0)
+  expect_equal(OUT "${va}\n")
+  run("${MONO}" -s raster -l 0 -p 1.5,2.5,3 --point=-1,2,3 -p "0.5 0.5 0")
+  expect_rc(0)
+  expect_equal(OUT "${va}\n1\n1\n")
+  # With --input as well, the points come first.
+  query("0.5 0.5 0\n" "${MONO}" -s raster -l 0 --point 1.5,2.5,3)
+  expect_rc(0)
+  expect_equal(OUT "${va}\n1\n")
+  foreach(bad "1,2" "a,b,c" "1,2,inf" "1,2,3,4")
+    run("${MONO}" --point "${bad}")
+    expect_rc(2)
+    expect_empty(OUT)
+    expect_contains(ERR "dsm-lookup: --point '${bad}': expected three finite numbers X,Y,Z")
+  endforeach()
+
+elseif(CHECK STREQUAL "input_file")
+  mono_all_pixels(light 1.5)
+  query("${POINTS}" "${MONO}" -s light -l 0)
+  expect_rc(0)
+  expect_equal(OUT "${VALUES}")
+  run("${MONO}" -i "${WORK_DIR}/no-such-queries.txt")
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}/no-such-queries.txt")
+  expect_contains(ERR "cannot open")
+  run("${MONO}" -i "${WORK_DIR}")
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}")
+
+elseif(CHECK STREQUAL "stats")
+  mono_all_pixels(raster 3)
+  query("${POINTS}" "${MONO}" -s raster -l 0 --stats)
+  expect_rc(0)
+  expect_equal(OUT "${VALUES}")
+  expect_lines(ERR 2)
+  expect_matches(ERR "^dsm-lookup: stats: 64 queries \\(0 bad\\) in [0-9.e+-]+ s, [0-9.e+]+ queries/s\n")
+  # The four level-0 tiles, each read once into a 256 MiB cache.
+  string(CONCAT pattern "\ndsm-lookup: stats: cache [0-9]+ hits, 4 misses \\([0-9.]+% hits\\), 4 tiles read "
+                        "\\([0-9]+ bytes\\), 0 evictions, peak [1-9][0-9]* of 268435456 bytes in use\n$")
+  expect_matches(ERR "${pattern}")
+  # A budget of 0 keeps one tile: every new tile evicts the last.
+  query("${POINTS}" "${MONO}" -s raster -l 0 --stats --cache-mb 0)
+  expect_rc(0)
+  expect_equal(OUT "${VALUES}")
+  expect_matches(ERR "4 tiles read \\([0-9]+ bytes\\), 3 evictions, peak [0-9]+ of 0 bytes")
+  # Bad lines are counted.
+  query("1 2\n1 2 3\n" "${MONO}" --stats)
+  expect_rc(1)
+  expect_contains(ERR "dsm-lookup: stats: 2 queries (1 bad)")
+
+elseif(CHECK STREQUAL "streaming")
+  if(NOT PYTHON)
+    message(FATAL_ERROR "check_dsm_lookup.cmake: -DPYTHON=... is required for the streaming check")
+  endif()
+  # A renderer's coprocess: write one line, wait for its answer (with a
+  # timeout) before writing the next, keeping standard input open throughout.
+  mono_k(1 2 a)
+  mono_k(6 7 b)
+  fraction_text(${a} 16 va)
+  fraction_text(${b} 16 vb)
+  set(script "${WORK_DIR}/stream.py")
+  file(WRITE "${script}" [=[
+import os, select, subprocess, sys, time
+
+tool, mono, expected_a, expected_b = sys.argv[1:5]
+process = subprocess.Popen([tool, mono, "--space", "raster", "--level", "0"],
+                           stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+pending = b""
+
+def read_line(stream, timeout=10.0):
+    """One line from a pipe, or a failure after timeout seconds."""
+    global pending
+    deadline = time.monotonic() + timeout
+    while b"\n" not in pending:
+        left = deadline - time.monotonic()
+        if left <= 0 or not select.select([stream], [], [], left)[0]:
+            sys.exit("no answer within %g s (got %r so far)" % (timeout, pending))
+        chunk = os.read(stream.fileno(), 4096)
+        if not chunk:
+            sys.exit("the tool closed its output early (got %r)" % pending)
+        pending += chunk
+    line, pending = pending.split(b"\n", 1)
+    return line.decode()
+
+def ask(query, expected):
+    process.stdin.write(query.encode() + b"\n")
+    process.stdin.flush()
+    answer = read_line(process.stdout)
+    if answer != expected:
+        sys.exit("query %r: expected %r, got %r" % (query, expected, answer))
+
+ask("1.5 2.5 3", expected_a)
+ask("6.5 7.5 1.5", "%.9g" % ((1 + float(expected_b)) / 2))
+process.stdin.write(b"# a comment, then a blank line: no answers\n\n")
+ask("0.5 0.5 0", "1")
+ask("1 2", "nan")  # a bad line still gets its answer at once ...
+error = read_line(process.stderr)  # ... and its complaint
+if error != "dsm-lookup: ERROR '<stdin>' line 6: expected 3 numbers (x y z), found 2 fields":
+    sys.exit("unexpected error line %r" % error)
+ask("6.5 7.5 3", expected_b)
+process.stdin.close()
+try:
+    status = process.wait(timeout=10)
+except subprocess.TimeoutExpired:
+    process.kill()
+    sys.exit("the tool did not exit after its input closed")
+if pending or process.stdout.read():
+    sys.exit("unexpected output after the last answer")
+if status != 1:
+    sys.exit("expected exit status 1 after a bad line, got %d" % status)
+print("streaming ok")
+]=])
+  execute_process(COMMAND "${PYTHON}" "${script}" "${DSM_LOOKUP}" "${MONO}" "${va}" "${vb}"
+    RESULT_VARIABLE RC OUTPUT_VARIABLE OUT ERROR_VARIABLE ERR TIMEOUT 50)
+  set(LAST_COMMAND "${PYTHON} ${script}")
+  expect_rc(0)
+  expect_contains(OUT "streaming ok")
+
+elseif(CHECK STREQUAL "help")
+  run(--help)
+  expect_rc(0)
+  expect_empty(ERR)
+  foreach(option --input --point --space --filter-width --filter --level --bias --format --header --error-bound
+                 --strict --stats --cache-mb --version docs/dsm-lookup.md)
+    expect_contains(OUT "${option}")
+  endforeach()
+
+elseif(CHECK STREQUAL "version")
+  run(--version)
+  expect_rc(0)
+  expect_equal(OUT "dsm-lookup ${VERSION}\n")
+
+elseif(CHECK STREQUAL "usage")
+  foreach(args
+      "" "--space;galaxy;${MONO}" "--filter;lanczos;${MONO}" "--filter-width;-1;${MONO}"
+      "--filter-width;wide;${MONO}" "--filter-width;1e9;${MONO}" "--level;-1;${MONO}" "--level;coarse;${MONO}"
+      "--format;xml;${MONO}"
+      "--cache-mb;-5;${MONO}" "--bias;inf;${MONO}" "--frobnicate;${MONO}" "${MONO};${RGB}")
+    run(${args})
+    expect_rc(2)
+    expect_empty(OUT)
+    expect_contains(ERR "dsm-lookup: ")
+  endforeach()
+
+elseif(CHECK STREQUAL "missing")
+  set(missing "${WORK_DIR}/no-such-map.dsm")
+  run("${missing}" --point 1,2,3)
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${missing}")
+  expect_contains(ERR "cannot open")
+
+elseif(CHECK STREQUAL "corrupt")
+  # Opens, but the first non-empty level-0 tile fails its CRC when a lookup reads it.
+  set(corrupt "${WORK_DIR}/corrupt.dsm")
+  execute_process(COMMAND "${MAKE_SAMPLE_MAP}" --corrupt "${RGB}" "${corrupt}" RESULT_VARIABLE rc)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "make_sample_map --corrupt failed")
+  endif()
+  query("1.5 1.5 5\n2.5 2.5 5\n" "${corrupt}" -s raster -l 0)
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${corrupt}")
+  expect_contains(ERR "CRC")
+  # Truncated: open() already fails.
+  set(truncated "${WORK_DIR}/truncated.dsm")
+  execute_process(COMMAND "${MAKE_SAMPLE_MAP}" --truncate "${RGB}" "${truncated}" 3000 RESULT_VARIABLE rc)
+  query("1.5 1.5 5\n" "${truncated}")
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${truncated}")
+
+elseif(CHECK STREQUAL "not_a_map")
+  set(text "${WORK_DIR}/notes.txt")
+  file(WRITE "${text}" "not a map at all\n")
+  query("1 2 3\n" "${text}")
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${text}")
+  expect_contains(ERR "not a deep shadow map")
+
+else()
+  message(FATAL_ERROR "check_dsm_lookup.cmake: unknown check '${CHECK}'")
+endif()

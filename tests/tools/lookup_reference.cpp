@@ -1,0 +1,110 @@
+// The library's own answers, for the dsm-lookup checks (check_dsm_lookup.cmake),
+// and a small monochrome map whose answers are known in closed form.
+//
+//   lookup_reference MAP SPACE FILTER WIDTH LEVEL BIAS < points
+//       reads "x y z" per line (std::istream >>, nothing else) and prints, per
+//       point, the dsm::LookupContext answer as "%.9g" values separated by
+//       commas: V or R,G,B, then the error bound. SPACE is world, light or
+//       raster; FILTER box, triangle or gaussian; LEVEL -1 for automatic.
+//   lookup_reference --write-mono OUT
+//       writes an 8 x 8 monochrome map, tiles of 4, 2 levels, tolerance 0, an
+//       orthographic light with window [0, 8] x [0, 8] and
+//       light = world + (1, -2, 0.5), so raster (rx, ry) = (lx, 8 - ly).
+//       Pixel (i, j) holds V = 1 up to z = 1, then falls linearly to
+//       k(i, j) / 16 at z = 2 and stays there, with k = (5 i + 3 j + i j) % 16.
+//
+// Exit status 0 on success, 1 on any error (one line on stderr).
+#include <array>
+#include <cstdint>
+#include <cstdio>
+#include <exception>
+#include <iostream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "dsm/dsm.h"
+
+namespace {
+
+constexpr std::uint32_t kMonoSize = 8;
+
+std::uint32_t monoNumerator(std::uint32_t i, std::uint32_t j) { return (5 * i + 3 * j + i * j) % 16; }
+
+void writeMono(const std::string& path) {
+    dsm::WriterOptions o;
+    o.width = kMonoSize;
+    o.height = kMonoSize;
+    o.tileSize = 4;
+    o.channels = 1;
+    o.mipLevels = 2;
+    o.tolerance = 0.0;
+    o.camera.projection = dsm::Projection::Orthographic;
+    o.camera.worldToLight = {1, 0, 0, 1, 0, 1, 0, -2, 0, 0, 1, 0.5, 0, 0, 0, 1};
+    o.camera.screenWindow = {0.0, 8.0, 0.0, 8.0};
+    o.metadata = R"({"generator":"lookup_reference"})";
+    dsm::MapWriter writer(path, o);
+    for (std::uint32_t ty = 0; ty < writer.tilesY(); ++ty)
+        for (std::uint32_t tx = 0; tx < writer.tilesX(); ++tx) {
+            std::vector<dsm::VisibilityFunction> pixels;
+            for (std::uint32_t y = 0; y < writer.tileHeight(ty); ++y)
+                for (std::uint32_t x = 0; x < writer.tileWidth(tx); ++x) {
+                    dsm::VisibilityFunction f(1);
+                    f.append(1.0f, 1.0f);
+                    f.append(2.0f, static_cast<float>(monoNumerator(tx * 4 + x, ty * 4 + y)) / 16.0f);
+                    pixels.push_back(std::move(f));
+                }
+            writer.writeTile(tx, ty, pixels);
+        }
+    writer.finish();
+}
+
+dsm::PixelFilter filterNamed(const std::string& name) {
+    if (name == "box") return dsm::PixelFilter::Box;
+    if (name == "triangle") return dsm::PixelFilter::Triangle;
+    if (name == "gaussian") return dsm::PixelFilter::Gaussian;
+    throw std::runtime_error("unknown filter '" + name + "'");
+}
+
+void printAnswers(const std::vector<std::string>& args) {
+    const auto map = dsm::DeepShadowMap::open(args[0]);
+    const std::string& space = args[1];
+    if (space != "world" && space != "light" && space != "raster")
+        throw std::runtime_error("unknown space '" + space + "'");
+    dsm::LookupOptions options;
+    options.filter = filterNamed(args[2]);
+    options.filterWidth = std::stod(args[3]);
+    options.level = std::stoi(args[4]);
+    options.bias = std::stod(args[5]);
+    dsm::LookupContext context(map);
+    std::array<double, 3> p{};
+    while (std::cin >> p[0] >> p[1] >> p[2]) {
+        const dsm::LookupResult r = space == "world"   ? context.world(p, options)
+                                    : space == "light" ? context.light(p, options)
+                                                       : context.raster(p[0], p[1], p[2], options);
+        for (int c = 0; c < (map->info().channels == 3 ? 3 : 1); ++c)
+            std::printf("%.9g,", r.v[static_cast<std::size_t>(c)]);
+        std::printf("%.9g\n", r.errorBound);
+    }
+    if (!std::cin.eof()) throw std::runtime_error("unreadable point");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    try {
+        const std::vector<std::string> args(argv + 1, argv + argc);
+        if (args.size() == 2 && args[0] == "--write-mono") {
+            writeMono(args[1]);
+        } else if (args.size() == 6) {
+            printAnswers(args);
+        } else {
+            std::cerr << "usage: lookup_reference MAP SPACE FILTER WIDTH LEVEL BIAS < points | --write-mono OUT\n";
+            return 2;
+        }
+    } catch (const std::exception& e) {
+        std::cerr << "lookup_reference: " << e.what() << '\n';
+        return 1;
+    }
+    return 0;
+}

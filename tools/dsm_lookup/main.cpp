@@ -1,0 +1,578 @@
+// dsm-lookup: answers shadow queries against a deep shadow map, one answer
+// line per query line, as a batch job or as a coprocess a renderer holds a
+// pipe to. Documentation, including the streaming protocol: docs/dsm-lookup.md.
+//
+// Uses only libdsm's public API; the line parsing and printing are the tool's.
+#include <array>
+#include <cerrno>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <utility>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+#include <nlohmann/json.hpp>
+
+#include "dsm/error.h"
+#include "dsm/lookup.h"
+#include "dsm/reader.h"
+#include "dsm/tile_cache.h"
+#include "tool_support.h"
+
+namespace {
+
+using namespace dsm::tools;
+
+constexpr const char* kToolName = "dsm-lookup";
+constexpr const char* kDocumentation = "docs/dsm-lookup.md";
+/// Longer lines are reported as bad rather than held in memory whole.
+constexpr std::size_t kMaxLineBytes = 4096;
+/// The process-wide cache's budget (tile_cache.h), used unless --cache-mb says otherwise.
+constexpr double kDefaultCacheMiB = 256.0;
+/// Keeps the byte count well inside size_t.
+constexpr double kMaxCacheMiB = 1024.0 * 1024.0;
+/// The widest map a reader accepts (ReaderOptions::maxWidth): a wider filter
+/// only costs time, and an unbounded one would make a lookup loop for ages.
+constexpr double kMaxFilterWidth = 131072.0;
+
+enum class Space { World, Light, Raster };
+enum class Format { Csv, Json };
+
+struct Options {
+    std::string map;
+    std::string input;  ///< empty: standard input unless --point is given
+    std::vector<std::string> points;
+    std::string space = "world";
+    std::string filter = "box";
+    double filterWidth = 1.0;
+    std::string level = "auto";
+    double bias = 0.0;
+    std::string format = "csv";
+    bool header = false;
+    bool errorBound = false;
+    bool strict = false;
+    bool stats = false;
+    double cacheMiB = kDefaultCacheMiB;
+};
+
+/// Thrown for an argument CLI11 accepted but that does not make sense.
+struct UsageError : std::runtime_error {
+    using std::runtime_error::runtime_error;
+};
+
+// ---------------------------------------------------------------------------
+// Parsing numbers and query lines (the line format is the tool's, not libdsm's)
+
+/// Makes a piece of input safe to quote in a one-line message.
+std::string quotedInput(std::string_view text) {
+    constexpr std::size_t kMaxShown = 32;
+    std::string out = "'";
+    for (std::size_t i = 0; i < text.size() && i < kMaxShown; ++i) {
+        const auto c = static_cast<unsigned char>(text[i]);
+        out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+    }
+    if (text.size() > kMaxShown) out += "...";
+    return out + "'";
+}
+
+/// A finite decimal number filling all of `text` (a leading '+' allowed), or
+/// nothing.
+std::optional<double> parseNumber(std::string_view text) {
+    if (!text.empty() && text.front() == '+') text.remove_prefix(1);
+    double value = 0.0;
+    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
+    if (error != std::errc() || end != text.data() + text.size() || !std::isfinite(value)) return std::nullopt;
+    return value;
+}
+
+/// What one input line holds: nothing to answer (blank or comment), a point,
+/// or a complaint about it.
+struct ParsedLine {
+    enum class Kind { Skip, Point, Bad } kind = Kind::Skip;
+    std::array<double, 3> point{};
+    std::string problem;
+};
+
+/// "x y z": three finite numbers separated by spaces, tabs or commas; '#'
+/// starts a comment that runs to the end of the line.
+ParsedLine parseQueryLine(std::string_view line) {
+    ParsedLine result;
+    if (const auto hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
+    const auto isSeparator = [](char c) { return c == ' ' || c == '\t' || c == ',' || c == '\r'; };
+    std::vector<std::string_view> fields;
+    std::size_t i = 0;
+    while (i < line.size()) {
+        while (i < line.size() && isSeparator(line[i])) ++i;
+        const std::size_t start = i;
+        while (i < line.size() && !isSeparator(line[i])) ++i;
+        if (i > start) fields.push_back(line.substr(start, i - start));
+    }
+    if (fields.empty()) return result;
+    result.kind = ParsedLine::Kind::Bad;
+    if (fields.size() != 3) {
+        result.problem = "expected 3 numbers (x y z), found " + std::to_string(fields.size()) + " fields";
+        return result;
+    }
+    for (std::size_t k = 0; k < 3; ++k) {
+        const std::optional<double> value = parseNumber(fields[k]);
+        if (!value) {
+            result.problem = std::string("xyz").substr(k, 1) + " " + quotedInput(fields[k]) + " is not a finite number";
+            return result;
+        }
+        result.point[k] = *value;
+    }
+    result.kind = ParsedLine::Kind::Point;
+    return result;
+}
+
+/// "X,Y,Z" of --point.
+std::array<double, 3> parsePointArgument(const std::string& text) {
+    const ParsedLine parsed = parseQueryLine(text);
+    if (parsed.kind != ParsedLine::Kind::Point || text.find('#') != std::string::npos)
+        throw UsageError("--point " + quotedInput(text) + ": expected three finite numbers X,Y,Z");
+    return parsed.point;
+}
+
+/// Reads lines of at most kMaxLineBytes; longer ones are consumed to their end
+/// and flagged. Reads the stream buffer directly: a line is answered as soon as
+/// its newline arrives, whatever follows.
+class LineReader {
+public:
+    explicit LineReader(std::streambuf& in) : in_(in) {}
+
+    /// False at the end of the input. `tooLong` is set for an overlong line,
+    /// of which `line` holds the start.
+    bool next(std::string& line, bool& tooLong) {
+        line.clear();
+        tooLong = false;
+        bool any = false;
+        for (;;) {
+            const int c = in_.sbumpc();
+            if (c == std::char_traits<char>::eof()) return any;
+            any = true;
+            if (c == '\n') return true;
+            if (line.size() < kMaxLineBytes) line.push_back(static_cast<char>(c));
+            else tooLong = true;
+        }
+    }
+
+    /// True when the next character can be read without waiting: the caller
+    /// flushes its answers before a read that may block.
+    bool inputWaiting() { return in_.in_avail() > 0; }
+
+private:
+    std::streambuf& in_;
+};
+
+// ---------------------------------------------------------------------------
+// Query modes: how a point becomes an answer. Point lookups for now; an
+// area-light mode (soft shadows) will be a second implementation.
+
+struct Answer {
+    std::array<double, 3> v{1.0, 1.0, 1.0};
+    double errorBound = 0.0;
+};
+
+class QueryMode {
+public:
+    virtual ~QueryMode() = default;
+    /// Throws dsm::Error: naming the map when the map is at fault, without
+    /// the map's name when the point is (see isMapError()).
+    virtual Answer answer(const std::array<double, 3>& point) = 0;
+};
+
+/// A filtered lookup at the point (dsm::LookupContext).
+class PointLookup final : public QueryMode {
+public:
+    PointLookup(std::shared_ptr<const dsm::DeepShadowMap> map, Space space, const dsm::LookupOptions& options)
+        : context_(std::move(map)), space_(space), options_(options) {}
+
+    Answer answer(const std::array<double, 3>& p) override {
+        dsm::LookupResult r;
+        switch (space_) {
+            case Space::World: r = context_.world(p, options_); break;
+            case Space::Light: r = context_.light(p, options_); break;
+            case Space::Raster: r = context_.raster(p[0], p[1], p[2], options_); break;
+        }
+        return Answer{r.v, r.errorBound};
+    }
+
+private:
+    dsm::LookupContext context_;
+    Space space_;
+    dsm::LookupOptions options_;
+};
+
+/// libdsm names the file in every message about the file; a message without
+/// it is about the query.
+bool isMapError(const std::string& message, const std::string& mapPath) {
+    const std::string prefix = "'" + mapPath + "'";
+    return message.compare(0, prefix.size(), prefix) == 0;
+}
+
+// ---------------------------------------------------------------------------
+// Output
+
+/// Shortest %g text with enough digits (9) to read back as the same float.
+std::string number(double v) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.9g", v);
+    return buffer;
+}
+
+/// Prints one answer line per query, buffered; flush() hands them over.
+class AnswerWriter {
+public:
+    AnswerWriter(Format format, int channels, bool errorBound)
+        : format_(format), channels_(channels), errorBound_(errorBound) {}
+
+    void header() {
+        if (format_ != Format::Csv) return;
+        text_ += channels_ == 3 ? "r,g,b" : "v";
+        if (errorBound_) text_ += ",error_bound";
+        text_ += '\n';
+    }
+
+    /// `key` is "line" or "point" (JSON only), `index` its number.
+    void answer(const char* key, std::uint64_t index, const Answer& a) {
+        if (format_ == Format::Csv) {
+            text_ += number(a.v[0]);
+            if (channels_ == 3) text_ += "," + number(a.v[1]) + "," + number(a.v[2]);
+            if (errorBound_) text_ += "," + number(a.errorBound);
+        } else {
+            text_ += "{\"" + std::string(key) + "\":" + std::to_string(index);
+            if (channels_ == 3)
+                text_ += ",\"r\":" + number(a.v[0]) + ",\"g\":" + number(a.v[1]) + ",\"b\":" + number(a.v[2]);
+            else
+                text_ += ",\"v\":" + number(a.v[0]);
+            if (errorBound_) text_ += ",\"error_bound\":" + number(a.errorBound);
+            text_ += '}';
+        }
+        text_ += '\n';
+    }
+
+    /// The placeholder that keeps answers aligned with queries: nan in every
+    /// CSV column, or {"line":N,"error":"..."} (`key` as for answer()).
+    void bad(const char* key, std::uint64_t index, const std::string& problem) {
+        if (format_ == Format::Csv) {
+            const int columns = (channels_ == 3 ? 3 : 1) + (errorBound_ ? 1 : 0);
+            for (int c = 0; c < columns; ++c) text_ += c ? ",nan" : "nan";
+        } else {
+            const nlohmann::json message = problem;
+            text_ += "{\"" + std::string(key) + "\":" + std::to_string(index) + ",\"error\":" +
+                     message.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "}";
+        }
+        text_ += '\n';
+    }
+
+    /// Writes what is buffered; false when standard output failed.
+    bool flush() {
+        if (!text_.empty()) {
+            std::cout.write(text_.data(), static_cast<std::streamsize>(text_.size()));
+            text_.clear();
+        }
+        std::cout.flush();
+        return static_cast<bool>(std::cout);
+    }
+
+private:
+    Format format_;
+    int channels_;
+    bool errorBound_;
+    std::string text_;
+};
+
+// ---------------------------------------------------------------------------
+// The run
+
+struct Totals {
+    std::uint64_t queries = 0;  ///< answered or bad
+    std::uint64_t bad = 0;
+};
+
+/// Why a run stopped early.
+enum class Stop { None, Strict, MapError, InputError, OutputError };
+
+std::string lineError(const std::string& inputName, std::uint64_t line, const std::string& problem) {
+    return oneLine(std::string(kToolName) + ": ERROR '" + inputName + "' line " + std::to_string(line) + ": " +
+                   problem);
+}
+
+class Session {
+public:
+    Session(const Options& o, std::string mapPath, QueryMode& mode, AnswerWriter& writer)
+        : options_(o), mapPath_(std::move(mapPath)), mode_(mode), writer_(writer) {}
+
+    /// Answers one point; on a query problem returns it, on a map problem
+    /// throws.
+    std::optional<std::string> answer(const char* key, std::uint64_t index, const std::array<double, 3>& p) {
+        try {
+            writer_.answer(key, index, mode_.answer(p));
+            return std::nullopt;
+        } catch (const dsm::Error& e) {
+            if (isMapError(e.what(), mapPath_)) throw;
+            return std::string(e.what());
+        }
+    }
+
+    Stop points(const std::vector<std::array<double, 3>>& points) {
+        for (std::size_t k = 0; k < points.size(); ++k) {
+            ++totals.queries;
+            if (const auto problem = answer("point", k + 1, points[k])) {
+                // Arguments were checked; only a point the lookup itself refuses gets here.
+                ++totals.bad;
+                writer_.bad("point", k + 1, *problem);
+                if (!writer_.flush()) return Stop::OutputError;
+                std::cerr << oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(k + 1) + ": " +
+                                     *problem)
+                          << '\n';
+                if (options_.strict) return Stop::Strict;
+            }
+        }
+        return writer_.flush() ? Stop::None : Stop::OutputError;
+    }
+
+    Stop lines(std::streambuf& in, const std::string& inputName) {
+        LineReader reader(in);
+        std::string text;
+        bool tooLong = false;
+        std::uint64_t lineNumber = 0;
+        for (;;) {
+            if (!reader.inputWaiting() && !writer_.flush()) return Stop::OutputError;
+            if (!reader.next(text, tooLong)) break;
+            ++lineNumber;
+            ParsedLine parsed;
+            if (tooLong) {
+                parsed.kind = ParsedLine::Kind::Bad;
+                parsed.problem = "longer than " + std::to_string(kMaxLineBytes) + " bytes";
+            } else {
+                parsed = parseQueryLine(text);
+            }
+            if (parsed.kind == ParsedLine::Kind::Skip) continue;
+            ++totals.queries;
+            std::optional<std::string> problem;
+            if (parsed.kind == ParsedLine::Kind::Bad) problem = parsed.problem;
+            else problem = answer("line", lineNumber, parsed.point);
+            if (!problem) continue;
+            ++totals.bad;
+            writer_.bad("line", lineNumber, *problem);
+            // The answer line goes out before the complaint, so a reader of
+            // both streams sees them in order.
+            if (!writer_.flush()) return Stop::OutputError;
+            std::cerr << lineError(inputName, lineNumber, *problem) << '\n';
+            if (options_.strict) return Stop::Strict;
+        }
+        return writer_.flush() ? Stop::None : Stop::OutputError;
+    }
+
+    Totals totals;
+
+private:
+    const Options& options_;
+    std::string mapPath_;
+    QueryMode& mode_;
+    AnswerWriter& writer_;
+};
+
+dsm::PixelFilter filterFromName(const std::string& name) {
+    if (name == "triangle") return dsm::PixelFilter::Triangle;
+    if (name == "gaussian") return dsm::PixelFilter::Gaussian;
+    return dsm::PixelFilter::Box;
+}
+
+Space spaceFromName(const std::string& name) {
+    if (name == "light") return Space::Light;
+    if (name == "raster") return Space::Raster;
+    return Space::World;
+}
+
+/// -1 for "auto", else the level.
+int levelFromText(const std::string& text) {
+    if (text == "auto") return -1;
+    int level = 0;
+    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), level);
+    if (error != std::errc() || end != text.data() + text.size() || level < 0)
+        throw UsageError("--level: expected auto or a level number >= 0, got " + quotedInput(text));
+    return level;
+}
+
+std::string percent(std::uint64_t part, std::uint64_t whole) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.1f%%", whole ? 100.0 * double(part) / double(whole) : 0.0);
+    return buffer;
+}
+
+void printStats(const Totals& totals, double seconds, const dsm::TileCacheStats& c) {
+    const double perSecond = seconds > 0.0 ? double(totals.queries) / seconds : 0.0;
+    char rate[64];
+    std::snprintf(rate, sizeof rate, "%.6g s, %.6g queries/s", seconds, perSecond);
+    std::cerr << kToolName << ": stats: " << totals.queries << " queries (" << totals.bad << " bad) in " << rate
+              << '\n'
+              << kToolName << ": stats: cache " << c.hits << " hits, " << c.misses << " misses ("
+              << percent(c.hits, c.hits + c.misses) << " hits), " << c.tilesRead << " tiles read (" << c.bytesRead
+              << " bytes), " << c.evictions << " evictions, peak " << c.peakBytesInUse << " of " << c.budgetBytes
+              << " bytes in use\n";
+}
+
+/// libdsm's message about the map, naming it as the user did: a map read from
+/// standard input is opened as a temporary copy, shown as "<stdin>".
+std::string mapMessage(std::string message, const InputFile& mapFile) {
+    if (mapFile.path() != mapFile.name() && isMapError(message, mapFile.path()))
+        message = "'" + mapFile.name() + "'" + message.substr(mapFile.path().size() + 2);
+    return message;
+}
+
+int run(const Options& o, const std::vector<std::array<double, 3>>& points, int level) {
+    const bool queriesFromStdin = o.input == "-" || (o.input.empty() && points.empty());
+    if (o.map == "-" && queriesFromStdin)
+        throw UsageError("the map and the queries cannot both come from standard input");
+
+    std::ifstream inputFile;
+    std::string inputName = "<stdin>";
+    std::unique_ptr<InputFile> mapFile;
+    std::shared_ptr<dsm::DeepShadowMap> map;
+    try {
+        mapFile = std::make_unique<InputFile>(o.map);
+        dsm::ReaderOptions readerOptions;
+        readerOptions.cache = dsm::TileCache::create(static_cast<std::size_t>(o.cacheMiB * 1024.0 * 1024.0));
+        map = dsm::DeepShadowMap::open(mapFile->path(), readerOptions);
+    } catch (const std::exception& e) {
+        if (!mapFile) reportError(kToolName, o.map, e.what());
+        else reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+        return kExitFailure;
+    }
+    if (!o.input.empty() && o.input != "-") {
+        std::error_code ignored;
+        if (std::filesystem::is_directory(o.input, ignored)) {
+            reportError(kToolName, o.input, "is a directory");
+            return kExitFailure;
+        }
+        inputFile.open(o.input, std::ios::binary);
+        if (!inputFile) {
+            const std::string reason = std::error_code(errno, std::generic_category()).message();
+            reportError(kToolName, o.input, "cannot open: " + reason);
+            return kExitFailure;
+        }
+        inputName = o.input;
+    }
+
+    dsm::LookupOptions lookup;
+    lookup.filter = filterFromName(o.filter);
+    lookup.filterWidth = o.filterWidth;
+    lookup.level = level;
+    lookup.bias = o.bias;
+    PointLookup mode(map, spaceFromName(o.space), lookup);
+    AnswerWriter writer(o.format == "json" ? Format::Json : Format::Csv, map->info().channels, o.errorBound);
+    Session session(o, map->path(), mode, writer);
+
+    const auto start = std::chrono::steady_clock::now();
+    Stop stop = Stop::None;
+    if (o.header) writer.header();
+    try {
+        stop = session.points(points);
+        if (stop == Stop::None && (queriesFromStdin || inputFile.is_open()))
+            stop = session.lines(queriesFromStdin ? *std::cin.rdbuf() : *inputFile.rdbuf(), inputName);
+    } catch (const std::exception& e) {
+        writer.flush();
+        reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+        stop = Stop::MapError;
+    }
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    if (inputFile.is_open() && inputFile.bad()) {
+        reportError(kToolName, inputName, "read error");
+        stop = Stop::InputError;
+    }
+    if (stop == Stop::OutputError) std::cerr << kToolName << ": ERROR: cannot write to standard output\n";
+    if (o.stats) printStats(session.totals, seconds, map->cache().stats());
+    return stop == Stop::None && session.totals.bad == 0 ? kExitOk : kExitFailure;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    // Unsynchronised streams buffer standard input, which lets the tool see
+    // when no further query is waiting (it then flushes its answers).
+    std::ios::sync_with_stdio(false);
+
+    Options o;
+    CLI::App app{"Look up shadow visibility in a deep shadow map (.dsm) for points read one per line (x y z) "
+                 "from standard input, a file, or --point. Prints one answer line per query.",
+                 kToolName};
+    app.add_option("FILE", o.map, "The deep shadow map (.dsm); - reads it from standard input")
+        ->required()
+        ->type_name("");
+    app.add_option("-i,--input", o.input,
+                   "Read queries from this file (- = standard input; the default unless --point is given)");
+    app.add_option("-p,--point", o.points, "A query X,Y,Z from the command line (repeatable), answered first")
+        ->type_name("X,Y,Z")
+        ->allow_extra_args(false);
+    app.add_option("-s,--space", o.space, "Space of the query points")
+        ->check(CLI::IsMember({"world", "light", "raster"}))
+        ->capture_default_str();
+    app.add_option("-w,--filter-width", o.filterWidth, "Filter width in level-0 pixels")
+        ->check(CLI::NonNegativeNumber)
+        ->capture_default_str();
+    app.add_option("-f,--filter", o.filter, "Lookup filter")
+        ->check(CLI::IsMember({"box", "triangle", "gaussian"}))
+        ->capture_default_str();
+    app.add_option("-l,--level", o.level, "Mip level: auto (from the filter width, blending two levels) or L")
+        ->type_name("auto|L")
+        ->capture_default_str();
+    app.add_option("-b,--bias", o.bias, "Depth bias subtracted from each query depth (light units)")
+        ->capture_default_str();
+    app.add_option("--format", o.format, "Answer format: CSV lines or JSON Lines")
+        ->check(CLI::IsMember({"csv", "json"}))
+        ->capture_default_str();
+    app.add_flag("--header", o.header, "Print a CSV header line first (csv only)");
+    app.add_flag("-e,--error-bound", o.errorBound, "Add each answer's compression error bound");
+    app.add_flag("--strict", o.strict, "Stop at the first bad line (exit status 1)");
+    app.add_flag("--stats", o.stats, "Print throughput and tile-cache statistics to standard error at the end");
+    app.add_option("--cache-mb", o.cacheMiB, "Tile cache budget in MiB")
+        ->check(CLI::NonNegativeNumber)
+        ->type_name("MIB")
+        ->capture_default_str();
+    configureApp(app, kToolName, kDocumentation);
+    app.footer("Exit status: 0 when every query was answered, 1 when a line was bad or the map could not be "
+               "read, 2 on a usage error.\nDocumentation: " +
+               std::string(kDocumentation));
+
+    if (const int status = parseArguments(app, argc, argv); status >= 0) return status;
+
+    int level = -1;
+    std::vector<std::array<double, 3>> points;
+    try {
+        if (!std::isfinite(o.bias)) throw UsageError("--bias: expected a finite number");
+        if (!(o.filterWidth <= kMaxFilterWidth))
+            throw UsageError("--filter-width: at most " + number(kMaxFilterWidth) + " pixels");
+        if (o.cacheMiB > kMaxCacheMiB) throw UsageError("--cache-mb: at most " + number(kMaxCacheMiB) + " MiB");
+        if (o.header && o.format != "csv") throw UsageError("--header applies to --format csv only");
+        level = levelFromText(o.level);
+        for (const std::string& p : o.points) points.push_back(parsePointArgument(p));
+    } catch (const UsageError& e) {
+        std::cerr << kToolName << ": " << e.what() << "\nRun with --help for more information.\n";
+        return kExitUsage;
+    }
+
+    try {
+        return run(o, points, level);
+    } catch (const UsageError& e) {
+        std::cerr << kToolName << ": " << e.what() << "\nRun with --help for more information.\n";
+        return kExitUsage;
+    } catch (const std::exception& e) {
+        std::cout.flush();
+        std::cerr << oneLine(std::string(kToolName) + ": ERROR: " + e.what()) << '\n';
+        return kExitFailure;
+    }
+}
