@@ -3,9 +3,13 @@
 #   cmake -DCHECK=<check> -DDSM_INFO=<dsm-info> -DMAKE_SAMPLE_MAP=<make_sample_map>
 #         -DWORK_DIR=<fresh dir> -DVERSION=<project version> -P check_dsm_info.cmake
 #
-# Checks: plain json json_many metadata_raw verify verify_bad not_a_map missing help version usage.
+# Checks: plain json json_many metadata_raw verify verify_bad not_a_map missing help version usage
+#         tiles pixel pixel_json stats pictures stdin picture_errors.
 # The sample (tests/tools/make_sample_map.cpp) is 48 x 32, RGB with counts,
 # tiles of 16, 2 levels, metadata {"generator":"make_sample_map",...}.
+# Its level-0 pixel (x, y) is empty when (x + y) % 7 == 0, otherwise it has
+# n = 1 + (3x + y) % 3 vertices i = 0..n-1 at z = 1 + i + y / 100 with count
+# i + 1 and R = 0.75^(i+1), G = (0.5 + (x % 10) / 100)^(i+1), B = 0.25^(i+1).
 cmake_minimum_required(VERSION 3.25)
 
 foreach(var CHECK DSM_INFO MAKE_SAMPLE_MAP WORK_DIR VERSION)
@@ -81,7 +85,7 @@ endfunction()
 
 # The map as described for the sample (object at the given JSON path).
 function(check_sample_json json file)
-  json_expect("${json}" "1.0" ${ARGN} schema_version)
+  json_expect("${json}" "1.1" ${ARGN} schema_version)
   json_expect("${json}" "1.0" ${ARGN} format_version)
   json_expect("${json}" "${file}" ${ARGN} file)
   file(SIZE "${file}" size)
@@ -116,6 +120,48 @@ function(check_sample_json json file)
   json_expect_type("${json}" OBJECT ${ARGN} metadata)
   json_expect("${json}" make_sample_map ${ARGN} metadata generator)
   json_expect("${json}" 3 ${ARGN} metadata scene objects)
+endfunction()
+
+# json_expect_matches(json regex path...): the value matches a regular
+# expression (for floats printed with all their digits).
+function(json_expect_matches json regex)
+  string(JSON value ERROR_VARIABLE error GET "${json}" ${ARGN})
+  if(error)
+    fail("JSON: ${error}")
+  endif()
+  if(NOT "${value}" MATCHES "${regex}")
+    fail("JSON ${ARGN}: expected a match of '${regex}', got '${value}'")
+  endif()
+endfunction()
+
+# Sum of a key over the elements of a JSON array, those with key `where` equal
+# to `value` only.
+function(json_sum json array key where value result)
+  string(JSON n LENGTH "${json}" ${array})
+  set(sum 0)
+  math(EXPR last "${n} - 1")
+  foreach(i RANGE ${last})
+    string(JSON w GET "${json}" ${array} ${i} ${where})
+    if(w STREQUAL value)
+      string(JSON v GET "${json}" ${array} ${i} ${key})
+      math(EXPR sum "${sum} + ${v}")
+    endif()
+  endforeach()
+  set(${result} ${sum} PARENT_SCOPE)
+endfunction()
+
+# oiiotool --info and --stats of a picture; sets INFO in the caller.
+function(picture_info picture)
+  find_program(OIIOTOOL oiiotool)
+  if(NOT OIIOTOOL)
+    message(FATAL_ERROR "oiiotool is needed to check pictures")
+  endif()
+  execute_process(COMMAND ${OIIOTOOL} --info -v --stats "${picture}"
+    RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "oiiotool --info '${picture}' failed (${rc}): ${out}${err}")
+  endif()
+  set(INFO "${out}" PARENT_SCOPE)
 endfunction()
 
 # A fresh directory with the sample map in it.
@@ -290,6 +336,395 @@ elseif(CHECK STREQUAL "missing")
   expect_empty(OUT)
   expect_one_error_line("${missing}")
 
+elseif(CHECK STREQUAL "tiles")
+  run(--json --tiles "${SAMPLE}")
+  expect_rc(0)
+  expect_empty(ERR)
+  check_sample_json("${OUT}" "${SAMPLE}")
+  json_expect_length("${OUT}" 8 tiles)  # 3 x 2 tiles of level 0, 2 x 1 of level 1
+  foreach(key level tx ty x y width height stored_bytes raw_bytes vertices non_empty_pixels min_z max_z crc32)
+    json_expect_type("${OUT}" NUMBER tiles 0 ${key})
+  endforeach()
+  # Level 0 tile 1,1 covers pixels 16-31 x 16-31; level 1 tile 1,0 is cut to 8 x 16.
+  foreach(expected "0;1;1;16;16;16;16" "1;1;0;16;0;8;16")
+    list(GET expected 0 level)
+    if(level EQUAL 0)
+      set(at 4)
+    else()
+      set(at 7)
+    endif()
+    set(k 0)
+    foreach(key level tx ty x y width height)
+      list(GET expected ${k} value)
+      json_expect("${OUT}" "${value}" tiles ${at} ${key})
+      math(EXPR k "${k} + 1")
+    endforeach()
+  endforeach()
+  # Depths from the sample's formula: tile row 0 starts at z = 1 + 0/100,
+  # tile row 1 at 1 + 16/100 (pixel 0,16 has one vertex) and ends at
+  # 3 + 29/100 (pixel 1,29: three vertices).
+  json_expect_number("${OUT}" 1.0 tiles 0 min_z)
+  json_expect_matches("${OUT}" "^1\\.1(6|59999)" tiles 3 min_z)
+  json_expect_matches("${OUT}" "^3\\.(29|28999)" tiles 3 max_z)
+  # The tiles add up to their level's totals in the level table.
+  foreach(level 0 1)
+    foreach(pair "stored_bytes;stored_bytes" "vertices;vertices" "non_empty_pixels;non_empty_pixels")
+      list(GET pair 0 tileKey)
+      list(GET pair 1 levelKey)
+      json_sum("${OUT}" tiles ${tileKey} level ${level} sum)
+      json_expect("${OUT}" "${sum}" levels ${level} ${levelKey})
+    endforeach()
+  endforeach()
+  # Every tile's raw size exceeds its zlib-compressed stored size here.
+  json_expect_matches("${OUT}" "^[1-9][0-9]*$" tiles 0 raw_bytes)
+  # --level keeps one level's tiles.
+  run(--json --tiles --level 1 "${SAMPLE}")
+  expect_rc(0)
+  json_expect_length("${OUT}" 2 tiles)
+  json_expect("${OUT}" 1 tiles 0 level)
+  # Text: a count and one row per tile.
+  run(--tiles "${SAMPLE}")
+  expect_rc(0)
+  expect_empty(ERR)
+  expect_matches(OUT "\n  tiles +8\n")
+  expect_matches(OUT "\n +level +tx +ty +x +y +stored bytes +raw bytes +vertices +non-empty +min z +max z +crc-32\n")
+  expect_matches(OUT "\n +0 +1 +1 +16-31 +16-31 +[0-9]+ +[0-9]+ +[0-9]+ +[0-9]+ +1\\.16 +3\\.29 +[0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f][0-9a-f]\n")
+  expect_matches(OUT "\n +1 +1 +0 +16-23 +0-15 +[0-9]+")
+  # Without --tiles there is no table.
+  run("${SAMPLE}")
+  expect_not_contains(OUT "crc-32")
+
+elseif(CHECK STREQUAL "pixel")
+  # Pixel 4,2: n = 1 + (12 + 2) % 3 = 3 vertices at z = 1.02, 2.02, 3.02 with
+  # R = 0.75^k, G = 0.54^k, B = 0.25^k and counts 1, 2, 3.
+  run(--pixel 4,2 "${SAMPLE}")
+  expect_rc(0)
+  expect_empty(ERR)
+  expect_contains(OUT "${SAMPLE}:\n")
+  expect_contains(OUT "\n  pixel 4,2 of level 0: 3 vertices in 1 layer, 3 channels\n")
+  expect_matches(OUT "\n +vertex +layer +z +R +G +B +count\n")
+  expect_matches(OUT "\n +0 +0 +1\\.02 +0\\.75 +0\\.54 +0\\.25 +1\n")
+  expect_matches(OUT "\n +1 +0 +2\\.02 +0\\.5625 +0\\.2916 +0\\.0625 +2\n")
+  expect_matches(OUT "\n +2 +0 +3\\.02 +0\\.421875 +0\\.157464 +0\\.015625 +3\n")
+  # Pixel 3,4 is on the empty diagonal ((3 + 4) % 7 == 0).
+  run(--pixel 3,4 "${SAMPLE}")
+  expect_rc(0)
+  expect_contains(OUT "\n  pixel 3,4 of level 0: no vertices (V = 1 at every depth)\n")
+  # Pixel 47,31: n = 1 + (141 + 31) % 3 = 2, G = 0.57^k.
+  run(--pixel 47,31 "${SAMPLE}")
+  expect_rc(0)
+  expect_contains(OUT "\n  pixel 47,31 of level 0: 2 vertices in 1 layer, 3 channels\n")
+  expect_matches(OUT "\n +1 +0 +2\\.31 +0\\.5625 +0\\.3249 +0\\.0625 +2\n")
+  # Out of range: a file-level error naming the pixel and the level.
+  run(--pixel 48,0 "${SAMPLE}")
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${SAMPLE}")
+  expect_contains(ERR "pixel 48,0")
+  expect_contains(ERR "level 0")
+  run(--pixel 23,16 --level 1 "${SAMPLE}")
+  expect_rc(1)
+  expect_one_error_line("${SAMPLE}")
+  expect_contains(ERR "pixel 23,16")
+  expect_contains(ERR "level 1")
+  run(--pixel 0,0 --level 2 "${SAMPLE}")
+  expect_rc(1)
+  expect_one_error_line("${SAMPLE}")
+  expect_contains(ERR "level 2")
+  # Other files are still described.
+  set(small "${WORK_DIR}/second.dsm")
+  file(COPY_FILE "${SAMPLE}" "${small}")
+  run(--pixel 4,2 "${WORK_DIR}/missing.dsm" "${small}")
+  expect_rc(1)
+  expect_contains(OUT "${small}:\n")
+  expect_contains(OUT "pixel 4,2 of level 0: 3 vertices")
+
+elseif(CHECK STREQUAL "pixel_json")
+  run(--json --pixel 4,2 "${SAMPLE}")
+  expect_rc(0)
+  expect_empty(ERR)
+  check_sample_json("${OUT}" "${SAMPLE}")
+  json_expect("${OUT}" 0 pixel level)
+  json_expect("${OUT}" 4 pixel x)
+  json_expect("${OUT}" 2 pixel y)
+  json_expect("${OUT}" 3 pixel channels)
+  json_expect("${OUT}" 1 pixel layers)
+  json_expect_length("${OUT}" 3 pixel vertices)
+  foreach(i 0 1 2)
+    math(EXPR z "${i} + 1")
+    math(EXPR count "${i} + 1")
+    json_expect_matches("${OUT}" "^${z}\\.(02|01999)" pixel vertices ${i} z)
+    json_expect("${OUT}" ${count} pixel vertices ${i} count)
+    json_expect("${OUT}" 0 pixel vertices ${i} layer)
+    json_expect_length("${OUT}" 3 pixel vertices ${i} value)
+  endforeach()
+  # Values that are exact in binary read back exactly.
+  json_expect_number("${OUT}" 0.75 pixel vertices 0 value 0)
+  json_expect_number("${OUT}" 0.0625 pixel vertices 1 value 2)
+  json_expect_number("${OUT}" 0.421875 pixel vertices 2 value 0)
+  json_expect_matches("${OUT}" "^0\\.(54|53999)" pixel vertices 0 value 1)
+  # An empty pixel has no vertices; a level-1 pixel is described at its level.
+  run(--json --pixel 0,0 "${SAMPLE}")
+  expect_rc(0)
+  json_expect_length("${OUT}" 0 pixel vertices)
+  run(--json --pixel 23,15 --level 1 "${SAMPLE}")
+  expect_rc(0)
+  json_expect("${OUT}" 1 pixel level)
+  json_expect("${OUT}" 23 pixel x)
+  json_expect_type("${OUT}" ARRAY pixel vertices)
+  # Without --pixel there is no "pixel" key.
+  run(--json "${SAMPLE}")
+  string(JSON ignored ERROR_VARIABLE missing GET "${OUT}" pixel)
+  if(NOT missing)
+    fail("expected no 'pixel' key without --pixel")
+  endif()
+
+elseif(CHECK STREQUAL "stats")
+  # Expected level-0 distribution from the sample's formula.
+  set(n0 0)
+  set(n1 0)
+  set(n2 0)
+  set(n3 0)
+  foreach(y RANGE 31)
+    foreach(x RANGE 47)
+      math(EXPR diagonal "(${x} + ${y}) % 7")
+      if(diagonal EQUAL 0)
+        math(EXPR n0 "${n0} + 1")
+      else()
+        math(EXPR n "1 + (3 * ${x} + ${y}) % 3")
+        math(EXPR n${n} "${n${n}} + 1")
+      endif()
+    endforeach()
+  endforeach()
+  math(EXPR vertices "${n1} + 2 * ${n2} + 3 * ${n3}")
+  math(EXPR twoOrThree "${n2} + ${n3}")
+  math(EXPR nonEmpty "1536 - ${n0}")
+  # Nearest rank of the median (768) and p99 (1521) in the sorted counts.
+  set(median 3)
+  foreach(k 2 1 0)
+    set(upTo 0)
+    foreach(j RANGE ${k})
+      math(EXPR upTo "${upTo} + ${n${j}}")
+    endforeach()
+    if(upTo GREATER_EQUAL 768)
+      set(median ${k})
+    endif()
+  endforeach()
+  run(--json --stats "${SAMPLE}")
+  expect_rc(0)
+  expect_empty(ERR)
+  check_sample_json("${OUT}" "${SAMPLE}")
+  json_expect_length("${OUT}" 2 stats)
+  json_expect("${OUT}" 0 stats 0 level)
+  json_expect("${OUT}" 1536 stats 0 pixels)
+  json_expect("${OUT}" ${nonEmpty} stats 0 non_empty_pixels)
+  json_expect("${OUT}" ${vertices} stats 0 vertices)
+  json_expect("${OUT}" 0 stats 0 min)
+  json_expect("${OUT}" 3 stats 0 max)
+  json_expect("${OUT}" ${median} stats 0 median)
+  json_expect("${OUT}" 3 stats 0 p99)
+  json_expect_type("${OUT}" NUMBER stats 0 mean)
+  json_expect_length("${OUT}" 3 stats 0 histogram)
+  json_expect("${OUT}" ${n0} stats 0 histogram 0 pixels)
+  json_expect("${OUT}" ${n1} stats 0 histogram 1 pixels)
+  json_expect("${OUT}" ${twoOrThree} stats 0 histogram 2 pixels)
+  json_expect("${OUT}" 2 stats 0 histogram 2 min)
+  json_expect("${OUT}" 3 stats 0 histogram 2 max)
+  # Level 1 agrees with the level table (decoded pixels against the directory).
+  string(JSON levelVertices GET "${OUT}" levels 1 vertices)
+  string(JSON levelNonEmpty GET "${OUT}" levels 1 non_empty_pixels)
+  json_expect("${OUT}" 384 stats 1 pixels)
+  json_expect("${OUT}" ${levelVertices} stats 1 vertices)
+  json_expect("${OUT}" ${levelNonEmpty} stats 1 non_empty_pixels)
+  # --level keeps one level; text shows the figures and the histogram.
+  run(--json --stats --level 1 "${SAMPLE}")
+  json_expect_length("${OUT}" 1 stats)
+  json_expect("${OUT}" 1 stats 0 level)
+  run(--stats --level 0 "${SAMPLE}")
+  expect_rc(0)
+  expect_contains(OUT "\n  vertices per pixel of level 0: 1536 pixels, ${nonEmpty} non-empty\n")
+  expect_matches(OUT "\n    min 0  mean [0-9.]+  median ${median}  p99 3  max 3\n")
+  expect_matches(OUT "\n +0 +${n0} +#+\n")
+  expect_matches(OUT "\n +1 +${n1} +#+\n")
+  string(REPEAT "#" 40 fullBar)  # the tallest bucket gets the full bar
+  expect_contains(OUT " ${twoOrThree}  ${fullBar}\n")
+  expect_not_contains(OUT "of level 1:")
+
+elseif(CHECK STREQUAL "pictures")
+  # Each picture: the size and channels of its level, readable by oiiotool.
+  # name|options|width|height|channels|type
+  foreach(spec
+      "slice.png|--slice,2.5|48|32|3|uint8 png"
+      "slice.exr|--slice,0.5|48|32|3|float openexr"
+      "opacity.exr|--opacity|48|32|3|float openexr"
+      "opacity1.png|--opacity,--level,1|24|16|3|uint8 png"
+      "heatmap.png|--vertex-heatmap|48|32|3|uint8 png"
+      "heatmap.exr|--vertex-heatmap|48|32|1|float openexr"
+      "heatmap1.tif|--vertex-heatmap,--level,1|24|16|1|float tiff")
+    string(REPLACE "|" ";" fields "${spec}")
+    list(GET fields 0 name)
+    list(GET fields 1 options)
+    string(REPLACE "," ";" options "${options}")
+    list(GET fields 2 width)
+    list(GET fields 3 height)
+    list(GET fields 4 channels)
+    list(GET fields 5 type)
+    set(picture "${WORK_DIR}/${name}")
+    run("${SAMPLE}" ${options} -o "${picture}")
+    expect_rc(0)
+    expect_empty(ERR)
+    expect_contains(OUT "${picture}: level ")
+    expect_contains(OUT ", ${width} x ${height}, ")
+    if(NOT EXISTS "${picture}")
+      fail("expected ${picture} to be written")
+    endif()
+    picture_info("${picture}")
+    if(channels EQUAL 1)
+      set(channelText "1 channel")
+    else()
+      set(channelText "${channels} channel")
+    endif()
+    string(FIND "${INFO}" "${width} x   ${height}, ${channelText}, ${type}" at)
+    if(at EQUAL -1)
+      string(REGEX MATCH "${width} x +${height}, ${channelText}, ${type}" found "${INFO}")
+      if(NOT found)
+        fail("oiiotool: expected ${width} x ${height}, ${channelText}, ${type} in:\n${INFO}")
+      endif()
+    endif()
+    set(INFO_${name} "${INFO}")
+  endforeach()
+  # Values against the sample's formula: nothing before z = 1, so the slice
+  # at 0.5 is white; opacity peaks at 1 - 0.75^3, 1 - 0.5^3, 1 - 0.25^3 in a
+  # three-vertex pixel with x % 10 == 0 and is 0 in empty pixels; at most 3
+  # vertices per pixel, which the PNG heatmap shows as white.
+  set(checks
+    "slice.exr|Stats Min: 1\\.0+ 1\\.0+ 1\\.0+ \\(float\\)"
+    "opacity.exr|Stats Min: 0\\.0+ 0\\.0+ 0\\.0+ \\(float\\)"
+    "opacity.exr|Stats Max: 0\\.578125 0\\.875000 0\\.984375 \\(float\\)"
+    "heatmap.exr|Stats Max: 3\\.0+ \\(float\\)"
+    "heatmap.exr|Stats Min: 0\\.0+ \\(float\\)"
+    "heatmap.png|Stats Max: 255 255 255 \\(of 255\\)"
+    "heatmap.png|Stats Min: 0 0 0 \\(of 255\\)"
+    "slice.png|oiio:ColorSpace: \"Linear\"")
+  foreach(check IN LISTS checks)
+    string(REPLACE "|" ";" fields "${check}")
+    list(GET fields 0 name)
+    list(GET fields 1 regex)
+    if(NOT "${INFO_${name}}" MATCHES "${regex}")
+      set(OUT "${INFO_${name}}")
+      fail("oiiotool on ${name}: expected a match of '${regex}'")
+    endif()
+  endforeach()
+  # The heatmap line says how the ramp is normalised.
+  run("${SAMPLE}" --vertex-heatmap -o "${WORK_DIR}/heatmap.png")
+  expect_contains(OUT "colour ramp from 0 (black) to 3 vertices (white)")
+  # Writing replaces a picture and leaves no temporary file behind.
+  file(GLOB leftovers "${WORK_DIR}/.*")
+  if(leftovers)
+    fail("temporary files left: ${leftovers}")
+  endif()
+
+elseif(CHECK STREQUAL "stdin")
+  # run(...) with the sample (or another file) on standard input.
+  macro(run_stdin input)
+    execute_process(COMMAND ${DSM_INFO} ${ARGN} INPUT_FILE "${input}"
+      RESULT_VARIABLE RC OUTPUT_VARIABLE OUT ERROR_VARIABLE ERR)
+    set(LAST_COMMAND "dsm-info ${ARGN} < ${input}")
+  endmacro()
+  run_stdin("${SAMPLE}" --json -)
+  expect_rc(0)
+  expect_empty(ERR)
+  json_expect("${OUT}" "<stdin>" file)
+  json_expect("${OUT}" 48 width)
+  file(SIZE "${SAMPLE}" size)
+  json_expect("${OUT}" ${size} file_bytes)
+  run_stdin("${SAMPLE}" -)
+  expect_rc(0)
+  expect_contains(OUT "<stdin>:\n")
+  run_stdin("${SAMPLE}" --verify -)
+  expect_rc(0)
+  if(NOT OUT STREQUAL "<stdin>: OK\n")
+    fail("expected '<stdin>: OK'")
+  endif()
+  run_stdin("${SAMPLE}" --pixel 4,2 -)
+  expect_rc(0)
+  expect_matches(OUT "\n +0 +0 +1\\.02 +0\\.75 +0\\.54 +0\\.25 +1\n")
+  run_stdin("${SAMPLE}" - --opacity -o "${WORK_DIR}/stdin.exr")
+  expect_rc(0)
+  expect_contains(OUT "of <stdin>")
+  picture_info("${WORK_DIR}/stdin.exr")
+  if(NOT INFO MATCHES "48 x +32, 3 channel, float openexr")
+    fail("oiiotool: expected 48 x 32, 3 channel, float openexr in:\n${INFO}")
+  endif()
+  # Stdin next to a file, and errors name "<stdin>", never the temporary copy.
+  run_stdin("${SAMPLE}" "${SAMPLE}" -)
+  expect_rc(0)
+  expect_contains(OUT "${SAMPLE}:\n")
+  expect_contains(OUT "\n<stdin>:\n")
+  set(text "${WORK_DIR}/text.dsm")
+  file(WRITE "${text}" "this is not a deep shadow map\n")
+  run_stdin("${text}" -)
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("<stdin>")
+  expect_not_contains(ERR "dsm-stdin")
+  run_stdin("${SAMPLE}" --pixel 99,0 -)
+  expect_rc(1)
+  expect_one_error_line("<stdin>")
+  expect_contains(ERR "pixel 99,0")
+
+elseif(CHECK STREQUAL "picture_errors")
+  set(picture "${WORK_DIR}/picture.png")
+  # Usage errors: status 2, nothing written.
+  foreach(args
+      "-o;${picture}"
+      "--slice;1"
+      "--opacity"
+      "--slice;nan;-o;${picture}"
+      "--slice;deep;-o;${picture}"
+      "--opacity;--vertex-heatmap;-o;${picture}"
+      "--opacity;--json;-o;${picture}"
+      "--opacity;--tiles;-o;${picture}"
+      "--opacity;--verify;-o;${picture}"
+      "--pixel;4"
+      "--pixel;4,-2"
+      "--pixel;a,b"
+      "--level;1"
+      "--verify;--level;1"
+      "--verify;--pixel;1,1")
+    run("${SAMPLE}" ${args})
+    expect_rc(2)
+    expect_empty(OUT)
+    expect_matches(ERR "^dsm-info: ")
+  endforeach()
+  run("${SAMPLE}" "${SAMPLE}" --opacity -o "${picture}")
+  expect_rc(2)
+  expect_contains(ERR "exactly one FILE")
+  if(EXISTS "${picture}")
+    fail("a usage error wrote ${picture}")
+  endif()
+  # File errors: status 1, one line naming the file at fault.
+  run("${SAMPLE}" --opacity --level 2 -o "${picture}")
+  expect_rc(1)
+  expect_one_error_line("${SAMPLE}")
+  expect_contains(ERR "level 2")
+  run("${WORK_DIR}/missing.dsm" --opacity -o "${picture}")
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}/missing.dsm")
+  set(unknown "${WORK_DIR}/picture.no-such-format")
+  run("${SAMPLE}" --opacity -o "${unknown}")
+  expect_rc(1)
+  expect_one_error_line("${unknown}")
+  set(nowhere "${WORK_DIR}/no such dir/picture.png")
+  run("${SAMPLE}" --opacity -o "${nowhere}")
+  expect_rc(1)
+  expect_one_error_line("${nowhere}")
+  expect_not_contains(ERR ".tmp-")
+  file(GLOB written "${WORK_DIR}/*.png" "${WORK_DIR}/.*")
+  if(written)
+    fail("failed runs left files: ${written}")
+  endif()
+
 elseif(CHECK STREQUAL "help")
   run(--help)
   expect_rc(0)
@@ -298,6 +733,9 @@ elseif(CHECK STREQUAL "help")
   expect_contains(OUT "--json")
   expect_contains(OUT "--verify")
   expect_contains(OUT "--version")
+  foreach(option --tiles --pixel --level --stats --slice --opacity --vertex-heatmap --output)
+    expect_contains(OUT "${option}")
+  endforeach()
 
 elseif(CHECK STREQUAL "version")
   run(--version)

@@ -1,9 +1,14 @@
 // dsm-info: describes deep shadow map files (size, tiling, light camera, mip
-// levels, metadata), as text or JSON, and optionally verifies them.
+// levels, metadata), as text or JSON; lists tiles, one pixel's function and
+// the statistics of vertices per pixel; verifies files; writes pictures of a
+// level (visibility slice, opacity, vertices per pixel).
 // Documentation, including the JSON schema: docs/dsm-info.md.
 //
-// Uses only libdsm's public API.
+// Uses only libdsm's public API; the logic lives there (map_json.h,
+// map_images.h, image_io.h). This file parses arguments and prints.
 #include <algorithm>
+#include <charconv>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <exception>
@@ -19,102 +24,108 @@
 #include <nlohmann/json.hpp>
 
 #include "dsm/error.h"
+#include "dsm/image_io.h"
+#include "dsm/map_images.h"
 #include "dsm/map_info.h"
+#include "dsm/map_json.h"
 #include "dsm/reader.h"
-
-#ifndef DSM_TOOLS_VERSION
-#define DSM_TOOLS_VERSION "unknown"
-#endif
+#include "tool_support.h"
 
 namespace {
 
-constexpr const char* kToolName = "dsm-info";
-/// Version of the --json output schema (docs/dsm-info.md). Bump the minor
-/// version when fields are added, the major one when fields change meaning.
-constexpr const char* kJsonSchemaVersion = "1.0";
+namespace tools = dsm::tools;
 
-/// Exit codes (docs/dsm-info.md).
-constexpr int kExitOk = 0;
-constexpr int kExitFileError = 1;
-constexpr int kExitUsage = 2;
+constexpr const char* kToolName = "dsm-info";
 
 using Json = nlohmann::ordered_json;
 
 /// Metadata nested deeper than this is shown as text: printing JSON recurses
 /// (and indents) once per level, and a file may hold 16 MiB of "[[[[...".
+/// (The same limit as the JSON description in libdsm's map_json.h.)
 constexpr std::size_t kMaxMetadataDepth = 100;
+
+struct PixelCoordinates {
+    std::uint32_t x = 0;
+    std::uint32_t y = 0;
+};
+
+/// Which picture to write with -o.
+enum class Picture { None, Slice, Opacity, VertexHeatmap };
 
 struct Options {
     std::vector<std::string> files;
     bool json = false;
     bool verify = false;
+    bool tiles = false;
+    bool stats = false;
+    std::optional<PixelCoordinates> pixel;
+    std::optional<unsigned> level;
+    Picture picture = Picture::None;
+    double sliceDepth = 0.0;
+    std::string output;
 };
 
-// ---------------------------------------------------------------------------
-// Errors
-
-/// Makes a message safe to print as one line.
-std::string oneLine(std::string s) {
-    for (char& c : s)
-        if (c == '\n' || c == '\r') c = ' ';
-    return s;
-}
-
-/// `dsm-info: ERROR '<file>': <message>`. libdsm's messages already start with
-/// the quoted file name ("'a.dsm': ..." or "'a.dsm' level 1 tile 0,2: ..."):
-/// that prefix is replaced rather than repeated.
-std::string errorLine(const std::string& file, const std::string& message) {
-    const std::string quoted = "'" + file + "'";
-    std::string_view rest = message;
-    if (rest.substr(0, quoted.size()) == quoted) {
-        rest.remove_prefix(quoted.size());
-        if (rest.substr(0, 2) == ": ") rest.remove_prefix(2);
-        else if (rest.substr(0, 1) == " ") rest.remove_prefix(1);
-    }
-    return oneLine(std::string(kToolName) + ": ERROR " + quoted + ": " + std::string(rest));
-}
-
-void reportError(const std::string& file, const std::string& message) {
-    std::cout.flush();  // keep stdout and stderr in order on a terminal
-    std::cerr << errorLine(file, message) << '\n';
-}
-
-/// Runs `action` for one file; any exception becomes one error line.
+/// Runs `action`; any exception becomes one error line about `file`.
 /// Returns false when it failed.
 template <class Action>
 bool guarded(const std::string& file, Action&& action) {
     try {
         action();
         return true;
-    } catch (const dsm::Error& e) {
-        reportError(file, e.what());
     } catch (const std::exception& e) {
-        reportError(file, e.what());
+        tools::reportError(kToolName, file, e.what());
     } catch (...) {
-        reportError(file, "unknown error");
+        tools::reportError(kToolName, file, "unknown error");
     }
     return false;
 }
 
+/// Runs `action` on a map read through `input`; libdsm's messages about the
+/// temporary copy of standard input then name it "<stdin>" instead.
+template <class Action>
+void namingInput(const tools::InputFile& input, Action&& action) {
+    try {
+        action();
+    } catch (const dsm::Error& e) {
+        if (input.path() == input.name()) throw;
+        std::string message = e.what();
+        for (std::size_t at = message.find(input.path()); at != std::string::npos;
+             at = message.find(input.path(), at + input.name().size()))
+            message.replace(at, input.path().size(), input.name());
+        throw dsm::Error(message);
+    }
+}
+
 // ---------------------------------------------------------------------------
-// Names and numbers
+// Argument values
 
-std::string projectionName(dsm::Projection p) {
-    switch (p) {
-        case dsm::Projection::Perspective: return "perspective";
-        case dsm::Projection::Orthographic: return "orthographic";
-    }
-    return "unknown (" + std::to_string(static_cast<int>(p)) + ")";
+/// "X,Y" with two non-negative decimal integers.
+std::optional<PixelCoordinates> parsePixel(std::string_view text) {
+    const auto comma = text.find(',');
+    if (comma == std::string_view::npos) return std::nullopt;
+    auto parse = [](std::string_view part, std::uint32_t& value) {
+        const auto [end, error] = std::from_chars(part.data(), part.data() + part.size(), value);
+        return !part.empty() && error == std::errc() && end == part.data() + part.size();
+    };
+    PixelCoordinates p;
+    if (!parse(text.substr(0, comma), p.x) || !parse(text.substr(comma + 1), p.y)) return std::nullopt;
+    return p;
 }
 
-std::string filterName(dsm::PixelFilter f) {
-    switch (f) {
-        case dsm::PixelFilter::Box: return "box";
-        case dsm::PixelFilter::Triangle: return "triangle";
-        case dsm::PixelFilter::Gaussian: return "gaussian";
+/// A depth: a decimal number, infinity allowed, NaN not.
+std::optional<double> parseDepth(const std::string& text) {
+    try {
+        std::size_t used = 0;
+        const double z = std::stod(text, &used);
+        if (used != text.size() || std::isnan(z)) return std::nullopt;
+        return z;
+    } catch (const std::exception&) {
+        return std::nullopt;
     }
-    return "unknown (" + std::to_string(static_cast<int>(f)) + ")";
 }
+
+// ---------------------------------------------------------------------------
+// Numbers as text
 
 std::string channelsText(int channels) {
     if (channels == 1) return "1 (mono)";
@@ -135,6 +146,12 @@ std::string fixed(double v, int decimals) {
     return buf;
 }
 
+std::string hex32(std::uint32_t v) {
+    char buf[16];
+    std::snprintf(buf, sizeof buf, "%08x", static_cast<unsigned>(v));
+    return buf;
+}
+
 /// "123456 bytes (120.6 KiB)".
 std::string bytesText(std::uint64_t bytes) {
     std::string s = std::to_string(bytes) + (bytes == 1 ? " byte" : " bytes");
@@ -149,6 +166,11 @@ std::string bytesText(std::uint64_t bytes) {
         s += " (" + fixed(v, 1) + " " + units[u] + ")";
     }
     return s;
+}
+
+/// "3 vertices", "1 layer".
+std::string plural(std::uint64_t n, const std::string& one, const std::string& many) {
+    return std::to_string(n) + " " + (n == 1 ? one : many);
 }
 
 // ---------------------------------------------------------------------------
@@ -199,10 +221,11 @@ public:
                 widths[c] = std::max(widths[c], row[c].size());
             }
         for (const auto& row : rows_) {
-            out << indent;
+            std::string line = indent;
             for (std::size_t c = 0; c < row.size(); ++c)
-                out << (c ? "  " : "") << std::string(widths[c] - row[c].size(), ' ') << row[c];
-            out << '\n';
+                line += (c ? "  " : "") + std::string(widths[c] - row[c].size(), ' ') + row[c];
+            while (!line.empty() && line.back() == ' ') line.pop_back();
+            out << line << '\n';
         }
     }
 
@@ -230,7 +253,7 @@ void indented(std::ostream& out, const std::string& text, const std::string& ind
 }
 
 void printCamera(std::ostream& out, const dsm::LightCamera& cam) {
-    field(out, "light camera", projectionName(cam.projection));
+    field(out, "light camera", dsm::projectionName(cam.projection));
     const auto& w = cam.screenWindow;
     field(out, "screen window", "[" + num(w[0]) + ", " + num(w[1]) + "] x [" + num(w[2]) + ", " + num(w[3]) + "]", 4);
     field(out, "near plane", num(cam.nearPlane), 4);
@@ -276,8 +299,7 @@ std::string pyramidText(const dsm::MapInfo& info) {
     std::uint64_t total = 0;
     for (const auto& L : info.levels) total += L.storedBytes;
     const std::uint64_t base = info.levels[0].storedBytes;
-    const std::string all = std::to_string(total) + " bytes in " + std::to_string(info.levels.size()) +
-                            (info.levels.size() == 1 ? " level" : " levels");
+    const std::string all = std::to_string(total) + " bytes in " + plural(info.levels.size(), "level", "levels");
     if (base == 0) return "- (level 0 stores nothing; " + all + ")";
     return fixed(static_cast<double>(total) / static_cast<double>(base), 2) + " x level 0 (" + all + ")";
 }
@@ -299,8 +321,7 @@ void printMetadata(std::ostream& out, const std::string& metadata) {
     }
 }
 
-void printHuman(std::ostream& out, const std::string& file, const dsm::MapInfo& info) {
-    out << file << ":\n";
+void printSummary(std::ostream& out, const dsm::MapInfo& info) {
     field(out, "format version", std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor));
     field(out, "size", std::to_string(info.width) + " x " + std::to_string(info.height));
     field(out, "tile size", std::to_string(info.tileSize));
@@ -308,7 +329,7 @@ void printHuman(std::ostream& out, const std::string& file, const dsm::MapInfo& 
     field(out, "sample counts", info.hasCounts ? "yes" : "no");
     field(out, "MTSM layers", std::to_string(info.maxLayers));
     printCamera(out, info.camera);
-    field(out, "build filter", filterName(info.filter) + ", width " + num(info.filterWidth));
+    field(out, "build filter", std::string(dsm::filterName(info.filter)) + ", width " + num(info.filterWidth));
     printLevels(out, info);
     field(out, "file size", bytesText(info.fileBytes));
     field(out, "mip pyramid", pyramidText(info));
@@ -316,62 +337,245 @@ void printHuman(std::ostream& out, const std::string& file, const dsm::MapInfo& 
 }
 
 // ---------------------------------------------------------------------------
-// JSON output (schema: docs/dsm-info.md)
+// Tiles, one pixel, statistics: gathered once, printed as text or JSON
 
-Json toJson(const std::string& file, const dsm::MapInfo& info) {
-    Json j;
-    j["schema_version"] = kJsonSchemaVersion;
-    j["file"] = file;
-    j["file_bytes"] = info.fileBytes;
-    j["format_version"] = std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor);
-    j["width"] = info.width;
-    j["height"] = info.height;
-    j["tile_size"] = info.tileSize;
-    j["channels"] = info.channels;
-    j["has_counts"] = info.hasCounts;
-    j["max_layers"] = info.maxLayers;
-    j["camera"] = {{"projection", projectionName(info.camera.projection)},
-                   {"world_to_light", info.camera.worldToLight},
-                   {"screen_window", info.camera.screenWindow},
-                   {"near_plane", info.camera.nearPlane}};
-    j["filter"] = {{"type", filterName(info.filter)}, {"width", info.filterWidth}};
-    Json levels = Json::array();
-    for (std::size_t l = 0; l < info.levels.size(); ++l) {
-        const dsm::LevelInfo& L = info.levels[l];
-        levels.push_back({{"level", l},
-                          {"width", L.width},
-                          {"height", L.height},
-                          {"tiles_x", L.tilesX},
-                          {"tiles_y", L.tilesY},
-                          {"tolerance", L.tolerance},
-                          {"error_bound", L.errorBound},
-                          {"vertices", L.vertexCount},
-                          {"non_empty_pixels", L.nonEmptyPixels},
-                          {"stored_bytes", L.storedBytes}});
+/// The levels an option applies to: the one given with --level, or all.
+std::vector<unsigned> selectedLevels(const dsm::DeepShadowMap& map, const std::optional<unsigned>& level) {
+    const auto count = static_cast<unsigned>(map.info().levels.size());
+    if (level) {
+        if (*level >= count)
+            throw dsm::Error("level " + std::to_string(*level) + " does not exist (" +
+                             plural(count, "level", "levels") + ")");
+        return {*level};
     }
-    j["levels"] = std::move(levels);
-    std::optional<Json> metadata = parseMetadata(info.metadata);
-    j["metadata"] = metadata ? std::move(*metadata) : Json(info.metadata);
-    return j;
+    std::vector<unsigned> all(count);
+    for (unsigned l = 0; l < count; ++l) all[l] = l;
+    return all;
 }
 
-std::string dumpJson(const Json& j) { return j.dump(2, ' ', false, Json::error_handler_t::replace); }
+struct TileRow {
+    unsigned level;
+    std::uint32_t tx, ty;
+    std::uint32_t x, y, width, height;  ///< the pixels the tile covers
+    dsm::TileSummary summary;
+};
+
+std::vector<TileRow> gatherTiles(const dsm::DeepShadowMap& map, const std::optional<unsigned>& level) {
+    std::vector<TileRow> rows;
+    const std::uint32_t size = map.info().tileSize;
+    for (const unsigned l : selectedLevels(map, level)) {
+        const dsm::LevelInfo& L = map.info().levels[l];
+        for (std::uint32_t ty = 0; ty < L.tilesY; ++ty)
+            for (std::uint32_t tx = 0; tx < L.tilesX; ++tx) {
+                const std::uint32_t x = tx * size, y = ty * size;
+                rows.push_back({l, tx, ty, x, y, std::min(size, L.width - x), std::min(size, L.height - y),
+                                map.tile(l, tx, ty)});
+            }
+    }
+    return rows;
+}
+
+void printTiles(std::ostream& out, const std::vector<TileRow>& rows) {
+    field(out, "tiles", std::to_string(rows.size()));
+    Table table({"level", "tx", "ty", "x", "y", "stored bytes", "raw bytes", "vertices", "non-empty", "min z", "max z",
+                 "crc-32"});
+    for (const TileRow& t : rows) {
+        const auto range = [](std::uint32_t from, std::uint32_t n) {
+            return std::to_string(from) + "-" + std::to_string(from + n - 1);
+        };
+        const bool empty = t.summary.empty();
+        table.add({std::to_string(t.level), std::to_string(t.tx), std::to_string(t.ty), range(t.x, t.width),
+                   range(t.y, t.height), std::to_string(t.summary.storedBytes), std::to_string(t.summary.rawBytes),
+                   std::to_string(t.summary.vertexCount), std::to_string(t.summary.nonEmptyPixels),
+                   empty ? "-" : num(t.summary.minZ), empty ? "-" : num(t.summary.maxZ),
+                   empty ? "-" : hex32(t.summary.crc32)});
+    }
+    table.print(out, "    ");
+}
+
+Json tilesJson(const std::vector<TileRow>& rows) {
+    Json tiles = Json::array();
+    for (const TileRow& t : rows)
+        tiles.push_back({{"level", t.level},
+                         {"tx", t.tx},
+                         {"ty", t.ty},
+                         {"x", t.x},
+                         {"y", t.y},
+                         {"width", t.width},
+                         {"height", t.height},
+                         {"stored_bytes", t.summary.storedBytes},
+                         {"raw_bytes", t.summary.rawBytes},
+                         {"vertices", t.summary.vertexCount},
+                         {"non_empty_pixels", t.summary.nonEmptyPixels},
+                         {"min_z", t.summary.minZ},
+                         {"max_z", t.summary.maxZ},
+                         {"crc32", t.summary.crc32}});
+    return tiles;
+}
+
+/// Layer of each vertex of a function.
+std::vector<std::size_t> vertexLayers(const dsm::VisibilityView& f) {
+    std::vector<std::size_t> layers(f.size(), 0);
+    for (std::size_t layer = 0; layer < f.layerCount(); ++layer)
+        for (std::size_t i = f.layerBegin(layer); i < f.layerEnd(layer); ++i) layers[i] = layer;
+    return layers;
+}
+
+/// Checks the pixel against the level first, so the message names both.
+dsm::PixelFunction readPixel(const dsm::DeepShadowMap& map, unsigned level, const PixelCoordinates& p) {
+    const auto& levels = map.info().levels;
+    if (level >= levels.size())
+        throw dsm::Error("level " + std::to_string(level) + " does not exist (" +
+                         plural(levels.size(), "level", "levels") + ")");
+    const dsm::LevelInfo& L = levels[level];
+    if (p.x >= L.width || p.y >= L.height)
+        throw dsm::Error("pixel " + std::to_string(p.x) + "," + std::to_string(p.y) + " is outside level " +
+                         std::to_string(level) + " (" + std::to_string(L.width) + " x " + std::to_string(L.height) +
+                         ")");
+    return map.pixel(level, p.x, p.y);
+}
+
+void printPixel(std::ostream& out, unsigned level, const PixelCoordinates& p, const dsm::VisibilityView& f) {
+    out << "  pixel " << p.x << "," << p.y << " of level " << level << ": ";
+    if (f.empty()) {
+        out << "no vertices (V = 1 at every depth)\n";
+        return;
+    }
+    out << plural(f.size(), "vertex", "vertices") << " in " << plural(f.layerCount(), "layer", "layers") << ", "
+        << plural(static_cast<std::uint64_t>(f.channels()), "channel", "channels") << '\n';
+    std::vector<std::string> header{"vertex", "layer", "z"};
+    if (f.channels() == 1) header.push_back("V");
+    else header.insert(header.end(), {"R", "G", "B"});
+    if (f.hasCounts()) header.push_back("count");
+    Table table(header);
+    const std::vector<std::size_t> layers = vertexLayers(f);
+    for (std::size_t i = 0; i < f.size(); ++i) {
+        // 7 digits: readable; --json gives the stored floats exactly.
+        std::vector<std::string> row{std::to_string(i), std::to_string(layers[i]), num(f.z(i), 7)};
+        for (int c = 0; c < f.channels(); ++c) row.push_back(num(f.value(i, c), 7));
+        if (f.hasCounts()) row.push_back(std::to_string(f.count(i)));
+        table.add(std::move(row));
+    }
+    table.print(out, "    ");
+}
+
+Json pixelJson(unsigned level, const PixelCoordinates& p, const dsm::VisibilityView& f) {
+    Json vertices = Json::array();
+    const std::vector<std::size_t> layers = vertexLayers(f);
+    for (std::size_t i = 0; i < f.size(); ++i) {
+        Json value = Json::array();
+        for (int c = 0; c < f.channels(); ++c) value.push_back(f.value(i, c));
+        Json vertex{{"z", f.z(i)}, {"value", std::move(value)}};
+        if (f.hasCounts()) vertex["count"] = f.count(i);
+        vertex["layer"] = layers[i];
+        vertices.push_back(std::move(vertex));
+    }
+    return {{"level", level},           {"x", p.x},
+            {"y", p.y},                 {"channels", f.channels()},
+            {"layers", f.layerCount()}, {"vertices", std::move(vertices)}};
+}
+
+std::string bucketText(std::size_t k) {
+    const std::uint64_t lo = dsm::VertexHistogram::bucketMin(k), hi = dsm::VertexHistogram::bucketMax(k);
+    return lo == hi ? std::to_string(lo) : std::to_string(lo) + "-" + std::to_string(hi);
+}
+
+void printStats(std::ostream& out, const std::vector<dsm::VertexHistogram>& histograms) {
+    constexpr std::size_t kBarWidth = 40;
+    for (const dsm::VertexHistogram& h : histograms) {
+        out << "  vertices per pixel of level " << h.level << ": " << plural(h.pixels, "pixel", "pixels") << ", "
+            << h.nonEmptyPixels << " non-empty\n";
+        out << "    min " << h.min << "  mean " << fixed(h.mean, 2) << "  median " << h.median << "  p99 " << h.p99
+            << "  max " << h.max << '\n';
+        const std::uint64_t tallest = h.buckets.empty() ? 0 : *std::max_element(h.buckets.begin(), h.buckets.end());
+        Table table({"vertices", "pixels", ""});
+        for (std::size_t k = 0; k < h.buckets.size(); ++k) {
+            // Any pixel at all shows at least one mark.
+            const std::size_t bar =
+                h.buckets[k] == 0 ? 0
+                                  : std::max<std::size_t>(1, static_cast<std::size_t>(
+                                                                 (h.buckets[k] * kBarWidth + tallest / 2) / tallest));
+            table.add({bucketText(k), std::to_string(h.buckets[k]), std::string(bar, '#') + std::string(kBarWidth - bar, ' ')});
+        }
+        table.print(out, "    ");
+    }
+}
+
+Json statsJson(const std::vector<dsm::VertexHistogram>& histograms) {
+    Json levels = Json::array();
+    for (const dsm::VertexHistogram& h : histograms) {
+        Json buckets = Json::array();
+        for (std::size_t k = 0; k < h.buckets.size(); ++k)
+            buckets.push_back({{"min", dsm::VertexHistogram::bucketMin(k)},
+                               {"max", dsm::VertexHistogram::bucketMax(k)},
+                               {"pixels", h.buckets[k]}});
+        levels.push_back({{"level", h.level},
+                          {"pixels", h.pixels},
+                          {"non_empty_pixels", h.nonEmptyPixels},
+                          {"vertices", h.vertices},
+                          {"min", h.min},
+                          {"mean", h.mean},
+                          {"median", h.median},
+                          {"p99", h.p99},
+                          {"max", h.max},
+                          {"histogram", std::move(buckets)}});
+    }
+    return levels;
+}
 
 // ---------------------------------------------------------------------------
 // Commands
+
+std::string dumpJson(const Json& j) { return j.dump(2, ' ', false, Json::error_handler_t::replace); }
+
+/// Describes one map (and its tiles, pixel, statistics when asked) as text
+/// into `text` or as JSON into `json`. Everything is gathered before anything
+/// is printed, so a failure never leaves a file half described.
+void describeOne(const Options& o, const std::string& name, const dsm::DeepShadowMap& map, std::ostream& text,
+                 Json& json) {
+    const dsm::MapInfo& info = map.info();
+    std::optional<std::vector<TileRow>> tiles;
+    if (o.tiles) tiles = gatherTiles(map, o.level);
+    std::optional<dsm::PixelFunction> pixel;
+    const unsigned pixelLevel = o.level.value_or(0);
+    if (o.pixel) pixel = readPixel(map, pixelLevel, *o.pixel);
+    std::optional<std::vector<dsm::VertexHistogram>> stats;
+    if (o.stats) {
+        stats.emplace();
+        for (const unsigned l : selectedLevels(map, o.level)) stats->push_back(dsm::vertexHistogram(map, l));
+    }
+
+    if (o.json) {
+        json = Json::parse(dsm::mapInfoJson(info, name, -1));
+        if (tiles) json["tiles"] = tilesJson(*tiles);
+        if (pixel) json["pixel"] = pixelJson(pixelLevel, *o.pixel, pixel->view());
+        if (stats) json["stats"] = statsJson(*stats);
+        return;
+    }
+    text << name << ":\n";
+    printSummary(text, info);
+    if (tiles) printTiles(text, *tiles);
+    if (pixel) printPixel(text, pixelLevel, *o.pixel, pixel->view());
+    if (stats) printStats(text, *stats);
+}
 
 int describe(const Options& o) {
     bool allOk = true;
     Json results = Json::array();
     bool first = true;
-    for (const std::string& file : o.files) {
-        allOk &= guarded(file, [&] {
-            const auto map = dsm::DeepShadowMap::open(file);
+    for (const std::string& argument : o.files) {
+        std::string name = argument == "-" ? "<stdin>" : argument;
+        allOk &= guarded(name, [&] {
+            const tools::InputFile input(argument);
+            std::ostringstream text;
+            Json json;
+            namingInput(input, [&] {
+                const auto map = dsm::DeepShadowMap::open(input.path());
+                describeOne(o, input.name(), *map, text, json);
+            });
             if (o.json) {
-                results.push_back(toJson(file, map->info()));
+                results.push_back(std::move(json));
             } else {
-                std::ostringstream text;  // printed whole: no half-described file
-                printHuman(text, file, map->info());
                 if (!first) std::cout << '\n';
                 std::cout << text.str();
                 first = false;
@@ -382,18 +586,61 @@ int describe(const Options& o) {
         if (o.files.size() > 1) std::cout << dumpJson(results) << '\n';
         else if (!results.empty()) std::cout << dumpJson(results[0]) << '\n';
     }
-    return allOk ? kExitOk : kExitFileError;
+    return allOk ? tools::kExitOk : tools::kExitFailure;
 }
 
 int verify(const Options& o) {
     bool allOk = true;
-    for (const std::string& file : o.files) {
-        allOk &= guarded(file, [&] {
-            dsm::validate(file);
-            std::cout << file << ": OK\n";
+    for (const std::string& argument : o.files) {
+        const std::string name = argument == "-" ? "<stdin>" : argument;
+        allOk &= guarded(name, [&] {
+            const tools::InputFile input(argument);
+            namingInput(input, [&] { dsm::validate(input.path()); });
+            std::cout << input.name() << ": OK\n";
         });
     }
-    return allOk ? kExitOk : kExitFileError;
+    return allOk ? tools::kExitOk : tools::kExitFailure;
+}
+
+/// Writes the picture asked for of the one file given.
+int writePicture(const Options& o) {
+    const std::string& argument = o.files.front();
+    const std::string name = argument == "-" ? "<stdin>" : argument;
+    bool keepsFloats = false;
+    if (!guarded(o.output, [&] { keepsFloats = dsm::imageFormatKeepsFloats(o.output); })) return tools::kExitFailure;
+
+    const unsigned level = o.level.value_or(0);
+    dsm::FloatImage image;
+    std::string note;
+    const bool computed = guarded(name, [&] {
+        const tools::InputFile input(argument);
+        namingInput(input, [&] {
+            const auto map = dsm::DeepShadowMap::open(input.path());
+            selectedLevels(*map, level);  // names the level when it does not exist
+            switch (o.picture) {
+                case Picture::Slice: image = dsm::visibilitySlice(*map, level, o.sliceDepth); break;
+                case Picture::Opacity: image = dsm::opacityImage(*map, level); break;
+                case Picture::VertexHeatmap: {
+                    image = dsm::vertexCountImage(*map, level);
+                    const float most = *std::max_element(image.values.begin(), image.values.end());
+                    if (keepsFloats) {
+                        note = ", vertex counts up to " + num(most);
+                    } else {
+                        image = dsm::colourRamp(image, most);
+                        note = ", colour ramp from 0 (black) to " + num(most) + " vertices (white)";
+                    }
+                    break;
+                }
+                case Picture::None: break;
+            }
+        });
+    });
+    if (!computed) return tools::kExitFailure;
+    if (!guarded(o.output, [&] { dsm::writeImage(o.output, image); })) return tools::kExitFailure;
+    std::cout << o.output << ": level " << level << " of " << name << ", " << image.width << " x " << image.height
+              << ", " << plural(static_cast<std::uint64_t>(image.channels), "channel", "channels") << ", "
+              << (keepsFloats ? "32-bit float" : "8-bit") << note << '\n';
+    return tools::kExitOk;
 }
 
 }  // namespace
@@ -401,39 +648,90 @@ int verify(const Options& o) {
 int main(int argc, char** argv) {
     Options o;
     CLI::App app{"Describe deep shadow map (.dsm) files: size, tiling, channels, light camera, mip levels and "
-                 "metadata.",
+                 "metadata; list tiles, one pixel's function and vertex statistics; verify files; write pictures "
+                 "of a level.",
                  kToolName};
-    app.add_option("FILE", o.files, "Deep shadow map (.dsm) files")->required()->type_name("");
+    app.add_option("FILE", o.files, "Deep shadow map (.dsm) files; - reads one from standard input")
+        ->required()
+        ->type_name("");
     auto* json = app.add_flag("--json", o.json, "Print one JSON object per file (an array for several files)");
+    auto* tiles = app.add_flag("--tiles", o.tiles, "Also list every tile: pixels, bytes, vertices, depths, CRC-32");
+    std::string pixelText;
+    auto* pixel = app.add_option("--pixel", pixelText, "Also print the function of pixel X,Y (of --level, default 0)")
+                      ->type_name("X,Y")
+                      ->check([](const std::string& s) {
+                          return parsePixel(s) ? std::string() : "expected X,Y (two non-negative integers)";
+                      });
+    auto* stats = app.add_flag("--stats", o.stats,
+                               "Also print the distribution of vertices per pixel of each level (or of --level)");
+    unsigned levelValue = 0;
+    auto* level = app.add_option("--level", levelValue,
+                                 "Mip level for --pixel and the pictures (default 0); limits --tiles and --stats "
+                                 "to that level")
+                      ->type_name("L");
     auto* verifyFlag = app.add_flag("--verify", o.verify,
                                     "Check every tile of every file (CRC-32, layout, function invariants) and print "
                                     "'FILE: OK' or the error instead of describing the files");
-    json->excludes(verifyFlag);
-    app.set_version_flag("--version", std::string(kToolName) + " " + DSM_TOOLS_VERSION);
-    app.footer("Exit status: 0 when every file was read (and verified), 1 when any file failed, 2 on a usage error.\n"
-               "Documentation: docs/dsm-info.md");
-    app.failure_message([](const CLI::App*, const CLI::Error& e) {
-        return std::string(kToolName) + ": " + e.what() + "\nRun with --help for more information.\n";
-    });
+    std::string sliceText;
+    auto* slice = app.add_option("--slice", sliceText, "Picture: visibility V(Z) at light depth Z, per channel")
+                      ->type_name("Z")
+                      ->check([](const std::string& s) {
+                          return parseDepth(s) ? std::string() : "expected a depth (a number, not NaN)";
+                      });
+    bool opacityFlag = false, heatmapFlag = false;
+    auto* opacity = app.add_flag("--opacity", opacityFlag, "Picture: opacity 1 - V(infinity), per channel");
+    auto* heatmap = app.add_flag("--vertex-heatmap", heatmapFlag,
+                                 "Picture: vertices per pixel (float counts in EXR/TIFF, a colour ramp up to the "
+                                 "maximum in 8-bit formats)");
+    auto* output = app.add_option("-o,--output", o.output, "Picture file to write; PNG, EXR, ... by its extension")
+                       ->type_name("F");
 
-    try {
-        app.parse(argc, argv);
-    } catch (const CLI::ParseError& e) {
-        // --help and --version go to stdout with status 0; usage errors to stderr.
-        return app.exit(e) == 0 ? kExitOk : kExitUsage;
+    const std::vector<CLI::Option*> pictures{slice, opacity, heatmap};
+    for (CLI::Option* picture : pictures) {
+        picture->needs(output);
+        for (CLI::Option* other : {json, tiles, pixel, stats, verifyFlag}) picture->excludes(other);
+        for (CLI::Option* other : pictures)
+            if (other != picture) picture->excludes(other);
+    }
+    for (CLI::Option* other : {json, tiles, pixel, stats, level}) verifyFlag->excludes(other);
+    app.callback([&] {
+        if (output->count() && !slice->count() && !opacity->count() && !heatmap->count())
+            throw CLI::ValidationError("-o", "needs --slice, --opacity or --vertex-heatmap");
+        if (level->count() && !pixel->count() && !tiles->count() && !stats->count() && !slice->count() &&
+            !opacity->count() && !heatmap->count())
+            throw CLI::ValidationError("--level", "needs --pixel, --tiles, --stats or a picture option");
+        if (output->count() && o.files.size() != 1)
+            throw CLI::ValidationError("-o", "a picture is made of exactly one FILE");
+    });
+    tools::configureApp(app, kToolName, "docs/dsm-info.md");
+    app.footer("Exit status: 0 when every file was read (and verified, or the picture written), 1 when any file "
+               "failed, 2 on a usage error.\nDocumentation: docs/dsm-info.md");
+
+    if (const int status = tools::parseArguments(app, argc, argv); status >= 0) return status;
+    if (pixel->count()) o.pixel = parsePixel(pixelText);
+    if (level->count()) o.level = levelValue;
+    if (slice->count()) {
+        o.picture = Picture::Slice;
+        o.sliceDepth = *parseDepth(sliceText);
+    } else if (opacityFlag) {
+        o.picture = Picture::Opacity;
+    } else if (heatmapFlag) {
+        o.picture = Picture::VertexHeatmap;
     }
 
-    int status = kExitFileError;
+    int status = tools::kExitFailure;
     try {
-        status = o.verify ? verify(o) : describe(o);
+        if (o.verify) status = verify(o);
+        else if (o.picture != Picture::None) status = writePicture(o);
+        else status = describe(o);
     } catch (const std::exception& e) {
-        std::cerr << oneLine(std::string(kToolName) + ": ERROR: " + e.what()) << '\n';
-        return kExitFileError;
+        std::cerr << tools::errorLine(kToolName, "", e.what()) << '\n';
+        return tools::kExitFailure;
     }
     std::cout.flush();
     if (!std::cout) {
         std::cerr << kToolName << ": ERROR: cannot write to standard output\n";
-        return kExitFileError;
+        return tools::kExitFailure;
     }
     return status;
 }
