@@ -1,0 +1,463 @@
+// The product of visibility functions (dsm/visibility_product.h) and the
+// merging of maps (dsm/merge.h): the error bound of spec/merge.md measured
+// against dense exact evaluation, counts, channels, steps and layers; map
+// products against a map of ones and against a whole-scene build; stitching
+// region builds byte for byte; the errors for maps that do not fit together.
+#include <dsm/dsm.h>
+#include <dsm/merge.h>
+#include <dsm/sampler.h>
+#include <dsm/scene.h>
+#include <dsm/visibility_product.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <iostream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "map_fixtures.h"
+#include "temp_dir.h"
+
+namespace dsm::test {
+namespace {
+
+constexpr double kStoreRounding = 0x1p-25;
+// Double arithmetic in the product and the oracle.
+constexpr double kArithmetic = 1e-12;
+
+// Depths at which to compare: every vertex depth of the functions, the double
+// just below it (the left limit side), and 16 points inside every gap between
+// consecutive depths, plus points beyond the last.
+std::vector<double> probeDepths(std::span<const VisibilityView> functions) {
+    std::vector<double> knots{0.0};
+    for (const VisibilityView& f : functions)
+        for (float z : f.depths()) knots.push_back(z);
+    std::sort(knots.begin(), knots.end());
+    knots.erase(std::unique(knots.begin(), knots.end()), knots.end());
+    std::vector<double> probes;
+    for (std::size_t i = 0; i < knots.size(); ++i) {
+        probes.push_back(knots[i]);
+        if (knots[i] > 0.0) probes.push_back(std::nextafter(knots[i], 0.0));
+        const double next = i + 1 < knots.size() ? knots[i + 1] : knots[i] + 1.0;
+        for (int k = 1; k < 16; ++k) probes.push_back(knots[i] + (next - knots[i]) * k / 16.0);
+    }
+    return probes;
+}
+
+// max over depths and channels of |out(z) - prod_i F_i(z)|, by the oracle.
+double productError(std::span<const VisibilityView> factors, const VisibilityFunction& out, int channels) {
+    std::vector<VisibilityView> all(factors.begin(), factors.end());
+    all.push_back(out.view());
+    double worst = 0.0;
+    for (double z : probeDepths(all))
+        for (int c = 0; c < channels; ++c) {
+            double exact = 1.0;
+            for (const VisibilityView& f : factors)
+                if (!f.empty()) exact *= lightCentreValue(f, z, c);
+            const double got = out.empty() ? 1.0 : out.evaluate(z, std::min(c, out.channels() - 1));
+            worst = std::max(worst, std::abs(got - exact));
+        }
+    return worst;
+}
+
+std::uint64_t totalCount(const VisibilityView& f, bool lightCentreOnly) {
+    std::uint64_t sum = 0;
+    const std::size_t end = lightCentreOnly ? f.lightEnd() : f.size();
+    for (std::size_t i = 0; i < end; ++i) sum += f.count(i);
+    return sum;
+}
+
+// ---------------------------------------------------------------------------
+// Functions
+
+TEST(VisibilityProduct, RandomFunctionsStayWithinTheBound) {
+    std::mt19937_64 rng(20251126);
+    std::uniform_int_distribution<int> vertices(1, 12), factorCount(2, 3);
+    std::bernoulli_distribution rgb(0.5), layered(0.2);
+    const double tolerances[] = {0.0, 0.01, 0.05, 0.2};
+    double worstSlack = -1.0, worstMeasured = 0.0;
+    for (int trial = 0; trial < 400; ++trial) {
+        std::vector<VisibilityFunction> owned;
+        const int n = factorCount(rng);
+        for (int i = 0; i < n; ++i)
+            owned.push_back(randomFunction(rng, rgb(rng) ? 3 : 1, true, layered(rng) ? 2 : 1, vertices(rng),
+                                           0.5f + 0.3f * float(i)));
+        std::vector<VisibilityView> factors(owned.begin(), owned.end());
+        VisibilityProductOptions options;
+        options.tolerance = tolerances[trial % 4];
+        options.keepCounts = true;
+        const VisibilityProduct p = multiplyVisibility(factors, options);
+        ASSERT_NO_THROW(p.function.validate());
+        int channels = 1;
+        for (const auto& f : owned) channels = std::max(channels, f.channels());
+        const double bound = p.interpolationError + std::max(options.tolerance, kStoreRounding) + kArithmetic;
+        const double measured = productError(factors, p.function, channels);
+        ASSERT_LE(measured, bound) << "trial " << trial << " tolerance " << options.tolerance;
+        // Chord errors stay under the requested limit per pairwise product.
+        const double perPair = std::max(options.tolerance / 16.0, 0x1p-20);
+        ASSERT_LE(p.interpolationError, (n - 1) * perPair * (1.0 + 1e-9)) << "trial " << trial;
+        // Counts: every light-centre sample of every factor, once.
+        std::uint64_t counted = 0;
+        for (const auto& f : owned) counted += totalCount(f.view(), true);
+        ASSERT_EQ(p.function.totalCount(), counted) << "trial " << trial;
+        ASSERT_EQ(p.function.layerCount(), 1u);
+        ASSERT_LE(p.function.size(), p.productVertices);
+        worstMeasured = std::max(worstMeasured, measured);
+        worstSlack = std::max(worstSlack, measured / bound);
+    }
+    std::cout << "[ measured ] largest |V_out - prod F| " << worstMeasured << ", largest share of the bound "
+              << worstSlack << "\n";
+}
+
+TEST(VisibilityProduct, TwoRampsGiveTheParabolaWithinTheChordLimit) {
+    // (1 - z)^2 on [0, 1]: both factors change over one segment, curvature 1.
+    VisibilityFunction ramp(1, false);
+    ramp.append(0.0f, 1.0f);
+    ramp.append(1.0f, 0.0f);
+    const VisibilityView factors[] = {ramp.view(), ramp.view()};
+    for (double limit : {1e-2, 1e-3, 1e-4}) {
+        VisibilityProductOptions options;
+        options.tolerance = 0.0;
+        options.maxInterpolationError = limit;
+        const VisibilityProduct p = multiplyVisibility(factors, options);
+        // n equal pieces with 1 / (4 n^2) <= limit (a little more for the
+        // rounding of depths to float32): n + 1 vertices.
+        const auto pieces = static_cast<std::size_t>(std::ceil(std::sqrt(1.0 / (4.0 * limit))));
+        EXPECT_GE(p.productVertices, pieces + 1) << limit;
+        EXPECT_LE(p.productVertices, pieces + 2) << limit;
+        EXPECT_LE(p.interpolationError, limit);
+        EXPECT_GT(p.interpolationError, 0.0);
+        double worst = 0.0;
+        for (int k = 0; k <= 10000; ++k) {
+            const double z = k / 10000.0;
+            worst = std::max(worst, std::abs(p.function.evaluate(z) - (1 - z) * (1 - z)));
+        }
+        EXPECT_LE(worst, p.interpolationError + kStoreRounding + kArithmetic);
+        EXPECT_GT(worst, 0.5 * p.interpolationError);  // the chord error is real and measured
+    }
+}
+
+TEST(VisibilityProduct, StepsMultiplyExactlyAtEveryDepth) {
+    VisibilityFunction a(1, false), b(1, false);
+    a.append(1.0f, 1.0f);
+    a.append(1.0f, 0.5f);
+    a.append(3.0f, 0.5f);
+    a.append(3.0f, 0.25f);
+    b.append(2.0f, 1.0f);
+    b.append(2.0f, 0.5f);
+    b.append(3.0f, 0.5f);
+    b.append(3.0f, 0.1f);
+    const VisibilityView factors[] = {a.view(), b.view()};
+    const VisibilityProduct p = multiplyVisibility(factors);
+    EXPECT_EQ(p.interpolationError, 0.0);
+    for (double z : {0.0, 0.999, 1.0, 1.5, 2.0, 2.5, 3.0, 4.0})
+        EXPECT_NEAR(p.function.evaluate(z), a.evaluate(z) * b.evaluate(z), kStoreRounding) << z;
+    EXPECT_FLOAT_EQ(p.function.evaluate(3.0), 0.025f);
+    // No segment where both change: no subdivision, at most two vertices a depth.
+    EXPECT_LE(p.productVertices, 2 * 3u);
+}
+
+TEST(VisibilityProduct, EmptyFunctionsAreOne) {
+    std::mt19937_64 rng(7);
+    const VisibilityFunction f = randomFunction(rng, 3, true, 1, 10);
+    const VisibilityFunction empty(1, false), emptyRgb(3, true);
+    const VisibilityView withEmpty[] = {empty.view(), f.view(), emptyRgb.view()};
+    VisibilityProductOptions options;
+    options.keepCounts = true;
+    const VisibilityProduct p = multiplyVisibility(withEmpty, options);
+    EXPECT_EQ(p.interpolationError, 0.0);
+    EXPECT_LE(productError(std::span<const VisibilityView>(&withEmpty[1], 1), p.function, 3), kStoreRounding);
+    EXPECT_EQ(p.function.totalCount(), f.totalCount());
+
+    const VisibilityView onlyEmpty[] = {empty.view(), emptyRgb.view()};
+    const VisibilityProduct none = multiplyVisibility(onlyEmpty);
+    EXPECT_TRUE(none.function.empty());
+    EXPECT_EQ(none.function.channels(), 1);
+    EXPECT_TRUE(multiplyVisibility({}).function.empty());
+}
+
+TEST(VisibilityProduct, MonochromeTimesRgbMultipliesEveryChannel) {
+    std::mt19937_64 rng(11);
+    const VisibilityFunction mono = randomFunction(rng, 1, false, 1, 8);
+    VisibilityFunction rgb(3, false);
+    const float near[] = {1.0f, 0.9f, 0.8f}, far[] = {0.2f, 0.5f, 0.7f};
+    rgb.append(0.6f, near);
+    rgb.append(4.0f, far);
+    const VisibilityView factors[] = {mono.view(), rgb.view()};
+    const VisibilityProduct p = multiplyVisibility(factors);
+    EXPECT_EQ(p.function.channels(), 3);
+    EXPECT_LE(productError(factors, p.function, 3), p.interpolationError + kStoreRounding + kArithmetic);
+
+    const VisibilityView monoOnly[] = {mono.view(), mono.view()};
+    EXPECT_EQ(multiplyVisibility(monoOnly).function.channels(), 1);
+}
+
+TEST(VisibilityProduct, LayeredFactorsContributeTheirLightCentreFunction) {
+    std::mt19937_64 rng(5);
+    const VisibilityFunction layered = randomFunction(rng, 1, true, 3, 5);
+    const VisibilityFunction plain = randomFunction(rng, 1, true, 1, 5, 0.7f);
+    ASSERT_EQ(layered.layerCount(), 3u);
+    const VisibilityView factors[] = {layered.view(), plain.view()};
+    VisibilityProductOptions options;
+    options.keepCounts = true;
+    const VisibilityProduct p = multiplyVisibility(factors, options);
+    EXPECT_EQ(p.function.layerCount(), 1u);
+    EXPECT_LE(productError(factors, p.function, 1), p.interpolationError + kStoreRounding + kArithmetic);
+    EXPECT_EQ(p.function.totalCount(), totalCount(layered.view(), true) + totalCount(plain.view(), true));
+    // Beyond layer 0 the light-centre visibility is 0, so is the product.
+    EXPECT_EQ(p.function.evaluate(layered.z(layered.layerBegin(1) - 1)), 0.0);
+}
+
+TEST(VisibilityProduct, RejectsBadOptions) {
+    VisibilityProductOptions options;
+    options.tolerance = -1.0;
+    EXPECT_THROW(multiplyVisibility({}, options), Error);
+    options.tolerance = std::nan("");
+    EXPECT_THROW(multiplyVisibility({}, options), Error);
+}
+
+// ---------------------------------------------------------------------------
+// Maps
+
+WriterOptions smallMapOptions(int channels, bool counts) {
+    WriterOptions w;
+    w.tileSize = 8;
+    w.channels = channels;
+    w.counts = counts;
+    w.tolerance = 0.01;
+    return w;
+}
+
+std::string messageOf(const std::vector<std::string>& inputs, const std::string& output, const MergeOptions& options) {
+    try {
+        mergeMaps(inputs, output, options);
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "(no error)";
+}
+
+TEST(MergeProduct, TimesAMapOfOnesKeepsTheValues) {
+    TempDir dir;
+    std::mt19937_64 rng(3);
+    const Image image = makeImage(20, 13, [&](std::uint32_t x, std::uint32_t) {
+        return x % 5 == 0 ? VisibilityFunction(3, true) : randomFunction(rng, x % 2 ? 3 : 1, true, 1, 9);
+    });
+    const Image ones = makeImage(20, 13, [&](std::uint32_t x, std::uint32_t y) {
+        VisibilityFunction f(1, true);
+        if ((x + y) % 3) {
+            f.append(0.2f + 0.1f * float(y), 1.0f, 2);
+            f.append(3.0f, 1.0f, 1);
+        }
+        return f;
+    });
+    writeMap(dir / "a.dsm", smallMapOptions(3, true), image);
+    writeMap(dir / "ones.dsm", smallMapOptions(1, true), ones);
+    MergeOptions options;
+    options.tolerance = 0.0;
+    const MergeReport report = mergeMaps({(dir / "a.dsm").string(), (dir / "ones.dsm").string()},
+                                         (dir / "out.dsm").string(), options);
+    EXPECT_EQ(report.interpolationError, 0.0);  // one factor is constant on every segment
+    const auto out = DeepShadowMap::open((dir / "out.dsm").string());
+    EXPECT_EQ(out->info().channels, 3);
+    EXPECT_TRUE(out->info().hasCounts);
+    EXPECT_EQ(out->info().levels.size(), fullLevelCount(20, 13));
+    for (std::uint32_t y = 0; y < 13; ++y)
+        for (std::uint32_t x = 0; x < 20; ++x) {
+            const VisibilityView& want = image.at(x, y).view();
+            const VisibilityView got = out->pixel(0, x, y).view();
+            const VisibilityView factors[] = {want};
+            ASSERT_LE(productError(factors, got.toFunction(), 3), kStoreRounding) << x << "," << y;
+            ASSERT_EQ(got.toFunction().totalCount(), image.at(x, y).totalCount() + ones.at(x, y).totalCount());
+        }
+    // The metadata records the inputs and the combined bound.
+    const auto metadata = nlohmann::json::parse(out->info().metadata);
+    EXPECT_EQ(metadata["merge"]["mode"], "product");
+    EXPECT_EQ(metadata["merge"]["inputs"].size(), 2u);
+    const double inputs = 2 * std::max(0.01, kStoreRounding);
+    EXPECT_DOUBLE_EQ(metadata["merge"]["input_error_bound"].get<double>(), inputs);
+    EXPECT_DOUBLE_EQ(metadata["merge"]["error_bound"].get<double>(), inputs + kStoreRounding);
+    EXPECT_NO_THROW(validate((dir / "out.dsm").string()));
+}
+
+TEST(MergeProduct, MismatchedMapsNameTheFieldBothValuesAndBothFiles) {
+    TempDir dir;
+    std::mt19937_64 rng(9);
+    const auto random = [&](std::uint32_t, std::uint32_t) { return randomFunction(rng, 1, false, 1, 4); };
+    writeMap(dir / "a.dsm", smallMapOptions(1, false), makeImage(16, 16, random));
+    writeMap(dir / "wide.dsm", smallMapOptions(1, false), makeImage(24, 16, random));
+    WriterOptions tiles = smallMapOptions(1, false);
+    tiles.tileSize = 4;
+    writeMap(dir / "tiles.dsm", tiles, makeImage(16, 16, random));
+    WriterOptions camera = smallMapOptions(1, false);
+    camera.camera.screenWindow = {-1.0, 1.0, -0.5, 0.5};
+    writeMap(dir / "camera.dsm", camera, makeImage(16, 16, random));
+    const std::string a = (dir / "a.dsm").string(), out = (dir / "out.dsm").string();
+
+    std::string m = messageOf({a, (dir / "wide.dsm").string()}, out, {});
+    EXPECT_NE(m.find("size is 24x16 but 16x16"), std::string::npos) << m;
+    EXPECT_NE(m.find("wide.dsm'"), std::string::npos) << m;
+    EXPECT_NE(m.find("a.dsm'"), std::string::npos) << m;
+    m = messageOf({a, (dir / "tiles.dsm").string()}, out, {});
+    EXPECT_NE(m.find("tile size is 4 but 8"), std::string::npos) << m;
+    m = messageOf({a, (dir / "camera.dsm").string()}, out, {});
+    EXPECT_NE(m.find("screen window is [-1,1,-0.5,0.5] but [-1,1,-1,1]"), std::string::npos) << m;
+    EXPECT_FALSE(std::filesystem::exists(out));
+    m = messageOf({a, a}, a, {});
+    EXPECT_NE(m.find("the output is also an input"), std::string::npos) << m;
+}
+
+// Two halves of a scene built separately against the whole scene, with the
+// same sample positions (same seed and resolution). With one sample per pixel
+// and a box filter one pixel wide every pixel is one ray, whose transmittance
+// is exactly the product of the halves': the merged map must be within the
+// recorded bound plus the whole map's own bound. With 4 samples and the
+// Gaussian filter the product of filtered halves differs from the filtered
+// product (an average of products is not a product of averages): measured
+// and printed only.
+TEST(MergeProduct, HalvesOfASceneAgainstTheWholeScene) {
+    TempDir dir;
+    const Scene whole = loadScene(DSM_SOURCE_DIR "/examples/leaves.json");
+    Scene leaves = whole, ground = whole;
+    leaves.objects.clear();
+    ground.objects.clear();
+    for (const SceneObject& o : whole.objects) (o.name == "ground" ? ground : leaves).objects.push_back(o);
+    ASSERT_FALSE(ground.objects.empty());
+    ASSERT_FALSE(leaves.objects.empty());
+    for (int spp : {1, 4}) {
+        BuildOptions b;
+        b.width = b.height = 32;
+        b.samplesPerPixel = static_cast<std::uint32_t>(spp);
+        b.tileSize = 16;
+        b.threads = 1;
+        b.tolerance = 0.01;
+        if (spp == 1) {
+            b.filter = PixelFilter::Box;
+            b.filterWidth = 1.0;
+        }
+        const std::string tag = std::to_string(spp);
+        buildMap(whole, b, (dir / ("whole" + tag + ".dsm")).string());
+        buildMap(leaves, b, (dir / ("leaves" + tag + ".dsm")).string());
+        buildMap(ground, b, (dir / ("ground" + tag + ".dsm")).string());
+        const MergeReport r = mergeMaps({(dir / ("leaves" + tag + ".dsm")).string(),
+                                         (dir / ("ground" + tag + ".dsm")).string()},
+                                        (dir / ("merged" + tag + ".dsm")).string(), {});
+        const auto merged = DeepShadowMap::open((dir / ("merged" + tag + ".dsm")).string());
+        const auto reference = DeepShadowMap::open((dir / ("whole" + tag + ".dsm")).string());
+        EXPECT_EQ(merged->info().channels, 3);  // RGB leaves times the monochrome ground
+        double worst = 0.0;
+        for (std::uint32_t y = 0; y < 32; ++y)
+            for (std::uint32_t x = 0; x < 32; ++x) {
+                const VisibilityView got = merged->pixel(0, x, y).view();
+                const VisibilityView want = reference->pixel(0, x, y).view();
+                const VisibilityView both[] = {got, want};
+                for (double z : probeDepths(both))
+                    for (int c = 0; c < 3; ++c)
+                        worst = std::max(worst, std::abs(got.evaluate(z, std::min(c, got.channels() - 1)) -
+                                                         want.evaluate(z, std::min(c, want.channels() - 1))));
+            }
+        const double bound = r.errorBound + reference->info().levels[0].errorBound + kArithmetic;
+        std::cout << "[ measured ] " << spp << " spp: largest |merged - whole| " << worst << ", bound " << bound
+                  << " (interpolation " << r.interpolationError << ")\n";
+        if (spp == 1) {
+            EXPECT_LE(worst, bound);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// Stitch
+
+struct RegionBuild {
+    Scene scene = loadScene(DSM_SOURCE_DIR "/examples/leaves.json");
+    BuildOptions options;
+    RegionBuild() {
+        options.width = 37;
+        options.height = 29;
+        options.samplesPerPixel = 4;
+        options.tileSize = 8;
+        options.threads = 1;
+        options.mtsmLayers = 2;  // counts and layers must survive as well
+    }
+    std::string build(const std::filesystem::path& path, std::array<std::uint32_t, 4> region) const {
+        BuildOptions o = options;
+        o.region = region;
+        buildMap(scene, o, path.string());
+        return path.string();
+    }
+};
+
+TEST(MergeStitch, RegionBuildsBecomeTheFullBuildByteForByte) {
+    TempDir dir;
+    const RegionBuild b;
+    const std::string full = b.build(dir / "full.dsm", {0, 0, 0, 0});
+    // Two parts on a tile boundary, and three not aligned to tiles.
+    const std::vector<std::vector<std::array<std::uint32_t, 4>>> splits = {
+        {{0, 0, 16, 29}, {16, 0, 37, 29}},
+        {{0, 0, 13, 29}, {13, 0, 37, 11}, {13, 11, 37, 29}},
+    };
+    for (std::size_t s = 0; s < splits.size(); ++s) {
+        std::vector<std::string> parts;
+        for (std::size_t i = 0; i < splits[s].size(); ++i)
+            parts.push_back(b.build(dir / ("part" + std::to_string(s) + std::to_string(i) + ".dsm"), splits[s][i]));
+        std::reverse(parts.begin(), parts.end());  // the order of the inputs does not matter
+        MergeOptions options;
+        options.mode = MergeMode::Stitch;
+        const std::string out = (dir / ("stitched" + std::to_string(s) + ".dsm")).string();
+        mergeMaps(parts, out, options);
+        EXPECT_EQ(readFile(out), readFile(full)) << "split " << s;
+    }
+}
+
+TEST(MergeStitch, OverlapsAndHolesAreListed) {
+    TempDir dir;
+    const RegionBuild b;
+    const std::string left = b.build(dir / "left.dsm", {0, 0, 20, 29});
+    const std::string right = b.build(dir / "right.dsm", {18, 0, 37, 29});
+    const std::string top = b.build(dir / "top.dsm", {20, 0, 37, 10});
+    MergeOptions options;
+    options.mode = MergeMode::Stitch;
+    const std::string out = (dir / "out.dsm").string();
+    std::string m = messageOf({left, right}, out, options);
+    EXPECT_NE(m.find("1 pair of regions overlap"), std::string::npos) << m;
+    EXPECT_NE(m.find("region 0,0,20,29 and '" + right + "' region 18,0,37,29 share 18,0,20,29"), std::string::npos)
+        << m;
+    m = messageOf({left, top}, out, options);
+    EXPECT_NE(m.find("leave 323 of 1073 pixels uncovered, in 1 rectangle"), std::string::npos) << m;
+    EXPECT_NE(m.find("20,10,37,29"), std::string::npos) << m;
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+TEST(MergeStitch, PartsOfDifferentBuildsAreRefused) {
+    TempDir dir;
+    RegionBuild b;
+    const std::string left = b.build(dir / "left.dsm", {0, 0, 20, 29});
+    b.options.seed = 2;
+    const std::string right = b.build(dir / "right.dsm", {20, 0, 37, 29});
+    b.options.seed = 1;
+    b.options.mtsmLayers = 1;
+    b.options.counts = true;
+    const std::string plain = b.build(dir / "plain.dsm", {20, 0, 37, 29});
+    MergeOptions options;
+    options.mode = MergeMode::Stitch;
+    const std::string out = (dir / "out.dsm").string();
+    std::string m = messageOf({left, right}, out, options);
+    EXPECT_NE(m.find("metadata settings.seed is 2 but 1"), std::string::npos) << m;
+    m = messageOf({left, plain}, out, options);
+    EXPECT_NE(m.find("layer count is 1 but 2"), std::string::npos) << m;
+
+    // A map without settings.region is not a region build.
+    std::mt19937_64 rng(1);
+    writeMap(dir / "written.dsm", smallMapOptions(1, false),
+             makeImage(8, 8, [&](std::uint32_t, std::uint32_t) { return randomFunction(rng, 1, false, 1, 3); }));
+    m = messageOf({(dir / "written.dsm").string()}, out, options);
+    EXPECT_NE(m.find("no settings.region"), std::string::npos) << m;
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
+}  // namespace
+}  // namespace dsm::test
