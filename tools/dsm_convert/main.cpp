@@ -1,0 +1,170 @@
+// dsm-convert: deep shadow maps to deep OpenEXR images and back; the
+// direction follows OUT's extension. Documentation: docs/dsm-convert.md; the
+// mapping and its error bounds: spec/exr-interop.md.
+//
+// Uses only libdsm's public API.
+#include <cstdio>
+#include <exception>
+#include <filesystem>
+#include <iostream>
+#include <string>
+
+#include <CLI/CLI.hpp>
+
+#include "dsm/error.h"
+#include "dsm/exr_deep.h"
+#include "dsm/reader.h"
+#include "tool_support.h"
+
+namespace {
+
+constexpr const char* kToolName = "dsm-convert";
+
+enum class Kind { Map, Exr, Unknown };
+
+Kind kindOf(const std::string& path) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".dsm") return Kind::Map;
+    if (ext == ".exr") return Kind::Exr;
+    return Kind::Unknown;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{"Convert a deep shadow map (.dsm) to a deep OpenEXR image (.exr) or back; the direction follows "
+                 "the extension of OUT.",
+                 kToolName};
+    std::string input, output;
+    app.add_option("IN", input, "Input .dsm or deep .exr; - reads standard input (the kind is then the opposite "
+                                "of OUT's)")
+        ->required()
+        ->type_name("");
+    app.add_option("OUT", output, "Output .exr or .dsm (written atomically)")->required()->type_name("");
+
+    dsm::ExrExportOptions exportOptions;
+    auto* level = app.add_option("--level", exportOptions.level, ".dsm -> .exr: mip level to export (default 0)")
+                      ->type_name("L");
+    auto* tiled = app.add_flag("--tiled", exportOptions.tiled,
+                               ".dsm -> .exr: write a deep tiled image (default deep scanline)");
+    auto* exrTile = app.add_option("--exr-tile-size", exportOptions.tileSize,
+                                   ".dsm -> .exr: tile edge of a --tiled image (default 64)")
+                        ->type_name("N")
+                        ->check(CLI::Range(1u, 65536u))
+                        ->needs(tiled);
+    auto* deviation = app.add_option("--max-deviation", exportOptions.maxDeviation,
+                                     ".dsm -> .exr: bound on |EXR transmittance - map visibility| from the "
+                                     "exponential reading of volume samples (default clamp(tolerance/2, 1e-5, 1e-3))")
+                          ->type_name("D")
+                          ->check(CLI::PositiveNumber);
+
+    dsm::ExrImportOptions importOptions;
+    auto* tolerance = app.add_option("-e,--tolerance", importOptions.tolerance,
+                                     ".exr -> .dsm: compression tolerance (default: the file's dsm:tolerance, "
+                                     "else 1/256)")
+                          ->type_name("E")
+                          ->check(CLI::NonNegativeNumber);
+    auto* linear = app.add_option("--max-linear-error", importOptions.maxLinearError,
+                                  ".exr -> .dsm: bound on the chords that replace exponential volume samples "
+                                  "(default clamp(tolerance/4, 1e-5, 1e-3))")
+                       ->type_name("D")
+                       ->check(CLI::PositiveNumber);
+    std::string cameraFrom;
+    auto* cameraMap = app.add_option("--camera-from", cameraFrom, ".exr -> .dsm: take the light camera of this map")
+                          ->type_name("MAP.dsm");
+    auto* fov = app.add_option("--fov", importOptions.fieldOfView,
+                               ".exr -> .dsm: perspective light of this horizontal field of view (degrees), placed "
+                               "by the file's worldToCamera")
+                    ->type_name("DEG")
+                    ->check(CLI::Validator(
+                        [](std::string& text) {
+                            double degrees = 0.0;
+                            try {
+                                degrees = std::stod(text);
+                            } catch (const std::exception&) {
+                                return std::string("expects a number of degrees");
+                            }
+                            return degrees > 0.0 && degrees < 180.0 ? std::string()
+                                                                    : std::string("expects degrees in (0, 180)");
+                        },
+                        "DEG", "in (0, 180)"));
+    auto* ortho = app.add_option("--ortho-width", importOptions.orthoWidth,
+                                 ".exr -> .dsm: orthographic light with a window this wide (light units)")
+                      ->type_name("W")
+                      ->check(CLI::PositiveNumber);
+    auto* mapTile = app.add_option("-t,--tile-size", importOptions.tileSize,
+                                   ".exr -> .dsm: map tile edge, a power of two 2..4096 (default 32)")
+                        ->type_name("N");
+    auto* mips = app.add_option("-m,--mip-levels", importOptions.mipLevels,
+                                ".exr -> .dsm: mip levels, 0 = full pyramid (default), 1 = none")
+                     ->type_name("N");
+    bool quiet = false;
+    app.add_flag("-q,--quiet", quiet, "Print nothing on success");
+    cameraMap->excludes(fov)->excludes(ortho);
+    fov->excludes(ortho);
+
+    Kind from = Kind::Unknown, to = Kind::Unknown;
+    app.callback([&] {
+        to = kindOf(output);
+        if (to == Kind::Unknown) throw CLI::ValidationError("OUT", "'" + output + "' must end in .dsm or .exr");
+        from = to == Kind::Map ? Kind::Exr : Kind::Map;
+        if (input != "-" && kindOf(input) != from)
+            throw CLI::ValidationError("IN", "'" + input + "' must end in " + (from == Kind::Map ? ".dsm" : ".exr") +
+                                                 " to make " + output);
+        const auto& exportOnly = {level, tiled, exrTile, deviation};
+        const auto& importOnly = {tolerance, linear, cameraMap, fov, ortho, mapTile, mips};
+        for (CLI::Option* o : to == Kind::Exr ? importOnly : exportOnly)
+            if (o->count())
+                throw CLI::ValidationError(o->get_name(), std::string("applies only to ") +
+                                                              (to == Kind::Exr ? ".exr -> .dsm" : ".dsm -> .exr"));
+    });
+    dsm::tools::configureApp(app, kToolName, "docs/dsm-convert.md");
+    app.footer("Exit status: 0 on success, 1 when a file cannot be read, converted or written, 2 on a usage "
+               "error.\nDocumentation: docs/dsm-convert.md");
+    if (const int status = dsm::tools::parseArguments(app, argc, argv); status >= 0) return status;
+
+    std::string inputName = input, inputPath = input, current = input;
+    try {
+        dsm::tools::InputFile in(input);
+        inputName = in.name();
+        inputPath = in.path();
+        if (to == Kind::Exr) {
+            const dsm::ExrExportReport r = dsm::exportDeepExr(in.path(), output, exportOptions);
+            if (!quiet)
+                std::printf("%s: wrote '%s': %u x %u, %s, %llu point and %llu volume samples; largest deviation "
+                            "%.3g (bound %.3g)\n",
+                            kToolName, output.c_str(), r.width, r.height, r.channels == 1 ? "mono" : "RGB",
+                            static_cast<unsigned long long>(r.pointSamples),
+                            static_cast<unsigned long long>(r.volumeSamples), r.largestDeviation, r.maxDeviation);
+            if (!quiet && r.oneStepExcess)
+                std::printf("  %llu volume samples one float step long exceed the bound between adjacent float "
+                            "depths (segments too steep to cut finer)\n",
+                            static_cast<unsigned long long>(r.oneStepExcess));
+        } else {
+            if (!cameraFrom.empty()) {
+                current = cameraFrom;
+                importOptions.camera = dsm::DeepShadowMap::open(cameraFrom)->info().camera;
+                current = input;
+            }
+            const dsm::ExrImportReport r = dsm::importDeepExr(in.path(), output, importOptions);
+            if (!quiet)
+                std::printf("%s: wrote '%s': %u x %u, %s, %llu samples -> %llu vertices, tolerance %.3g, camera "
+                            "from %s\n",
+                            kToolName, output.c_str(), r.width, r.height, r.channels == 1 ? "mono" : "RGB",
+                            static_cast<unsigned long long>(r.samples), static_cast<unsigned long long>(r.vertices),
+                            r.tolerance, r.cameraSource.c_str());
+        }
+    } catch (const std::exception& e) {
+        // Library messages name the file they concern: the input, the output or the --camera-from map.
+        std::string what = e.what();
+        if (inputPath != input)  // standard input: name it, not its temporary copy
+            for (std::size_t at; (at = what.find(inputPath)) != std::string::npos;)
+                what.replace(at, inputPath.size(), inputName);
+        std::string file = current == input ? inputName : current;
+        if (what.rfind("'" + output + "'", 0) == 0) file = output;
+        dsm::tools::reportError(kToolName, file, what);
+        return dsm::tools::kExitFailure;
+    }
+    return dsm::tools::kExitOk;
+}
