@@ -220,10 +220,6 @@ struct BuiltMap {
     std::vector<std::uint64_t> hairPixels, hairVertices;
 };
 
-const char* filterName(PixelFilter f) {
-    return f == PixelFilter::Box ? "box" : f == PixelFilter::Triangle ? "triangle" : "Gaussian";
-}
-
 BuiltMap build(const Scene& scene, std::uint32_t size, std::uint32_t spp, const fs::path& dir, const Config& cfg) {
     BuiltMap m;
     m.size = size;

@@ -1,0 +1,403 @@
+// bench_soft_shadows: area-light soft shadows on the receivers a viewing
+// camera sees, rendered three ways with the same light samples per receiver:
+//   (a) ray tracing the deep shadow map as an MTSM (dsm/soft_shadow.h),
+//   (b) the classic PCF-based soft shadow from the same map (Xie et al. §3),
+//   (c) the reference: stochastic ray tracing of the real scene (Embree).
+// Reports, as Xie et al. Tables 1-2, the mean and standard deviation of the
+// per-pixel difference to (c) and the shadow time per frame, for each example
+// scene, light radius (small, medium, large) and light sample count; then a
+// sweep of the knobs (layers K, bias, samples N) on the first scene. Writes
+// JSON for bench/trade_report.py and one contact sheet per scene (PNG).
+//
+//   bench_soft_shadows --out FILE.json --images DIR [--smoke] [--scenes A,B] [--threads T]
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include <dsm/area_light.h>
+#include <dsm/image_io.h>
+#include <dsm/map_images.h>
+#include <dsm/reference_tracer.h>
+#include <dsm/sampler.h>
+#include <dsm/scene.h>
+#include <dsm/soft_shadow.h>
+
+#ifndef DSM_SOFT_EXAMPLES_DIR
+#define DSM_SOFT_EXAMPLES_DIR "examples"
+#endif
+
+namespace {
+
+using Json = nlohmann::ordered_json;
+using dsm::Vec3;
+
+struct Config {
+    bool smoke = false;
+    std::vector<std::string> scenes;
+    std::uint32_t mapResolution = 256, mapSpp = 16;
+    int mapLayers = 4;
+    std::uint32_t imageWidth = 160, imageHeight = 120;
+    std::vector<int> samples{64, 256};
+    unsigned threads = 0;
+    std::filesystem::path images, workDir;
+};
+
+Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+Vec3 mul(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3 cross(const Vec3& a, const Vec3& b) {
+    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3 normalize(const Vec3& a) { return mul(a, 1.0 / std::sqrt(dot(a, a))); }
+
+/// Runs body(row) for every row on `threads` threads (rows handed out in turn).
+template <class Body>
+void parallelRows(std::uint32_t rows, unsigned threads, Body&& body) {
+    std::atomic<std::uint32_t> next{0};
+    std::vector<std::thread> pool;
+    for (unsigned t = 0; t < threads; ++t)
+        pool.emplace_back([&] {
+            for (std::uint32_t row; (row = next++) < rows;) body(row);
+        });
+    for (auto& t : pool) t.join();
+}
+
+double seconds(std::chrono::steady_clock::time_point start) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+}
+
+/// What the viewing camera sees: per pixel a receiver point (offset off its
+/// surface) or none.
+struct Receivers {
+    std::uint32_t width = 0, height = 0;
+    std::vector<Vec3> points;
+    std::vector<char> valid;
+};
+
+/// A camera that looks at the point the light's axis meets, from the light's
+/// position turned 40 degrees about the world y axis around that point and
+/// raised a little, so shadows fall visibly on the receivers.
+Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tracer, const Config& config,
+                        double& sceneScale) {
+    const Vec3 lightPos = scene.light.position, axis = normalize(scene.light.direction);
+    const auto hit = tracer.closestHit(lightPos, axis, 1e30);
+    const double distance = hit ? hit->distance : 10.0;
+    sceneScale = distance;
+    const Vec3 target = add(lightPos, mul(axis, distance));
+    const Vec3 back = sub(lightPos, target);
+    const double angle = 40.0 * 3.14159265358979 / 180.0;
+    Vec3 eyeOffset{std::cos(angle) * back[0] + std::sin(angle) * back[2], back[1] * 0.8,
+                   -std::sin(angle) * back[0] + std::cos(angle) * back[2]};
+    const Vec3 eye = add(target, mul(eyeOffset, 1.1));
+    const Vec3 forward = normalize(sub(target, eye));
+    const Vec3 right = normalize(cross(forward, {0.0, 1.0, 0.0}));
+    const Vec3 up = cross(right, forward);
+    const double tanHalf = std::tan(0.5 * 45.0 * 3.14159265358979 / 180.0);
+    Receivers r;
+    r.width = config.imageWidth;
+    r.height = config.imageHeight;
+    r.points.resize(std::size_t(r.width) * r.height);
+    r.valid.assign(r.points.size(), 0);
+    const double aspect = double(r.width) / r.height;
+    for (std::uint32_t y = 0; y < r.height; ++y)
+        for (std::uint32_t x = 0; x < r.width; ++x) {
+            const double sx = (2.0 * (x + 0.5) / r.width - 1.0) * tanHalf * aspect;
+            const double sy = (1.0 - 2.0 * (y + 0.5) / r.height) * tanHalf;
+            const Vec3 d = normalize(add(forward, add(mul(right, sx), mul(up, sy))));
+            const auto h = tracer.closestHit(eye, d, 1e30);
+            if (!h) continue;
+            // Off the surface, towards the camera, so neither tracer sees the
+            // receiver's own surface.
+            r.points[std::size_t(y) * r.width + x] = add(h->position, mul(h->normal, 1e-4 * distance));
+            r.valid[std::size_t(y) * r.width + x] = 1;
+        }
+    return r;
+}
+
+struct Frame {
+    std::vector<float> v;  // channel 0 visibility per pixel (-1 where no receiver)
+    double seconds = 0.0;
+};
+
+enum class Method { Mtsm, Pcf, Reference };
+
+Frame render(Method method, const Receivers& r, const std::shared_ptr<const dsm::SoftShadowTracer>& tracer,
+             const dsm::ReferenceTracer& reference, const dsm::AreaLight& light, const dsm::SoftShadowOptions& o,
+             unsigned threads) {
+    Frame f;
+    f.v.assign(r.points.size(), -1.0f);
+    const auto start = std::chrono::steady_clock::now();
+    parallelRows(r.height, threads, [&](std::uint32_t y) {
+        dsm::SoftShadowContext context(tracer);
+        std::vector<Vec3> samples;
+        for (std::uint32_t x = 0; x < r.width; ++x) {
+            const std::size_t i = std::size_t(y) * r.width + x;
+            if (!r.valid[i]) continue;
+            const Vec3& p = r.points[i];
+            double v = 1.0;
+            if (method == Method::Mtsm) {
+                v = context.visibility(p, o).v[0];
+            } else if (method == Method::Pcf) {
+                v = context.pcfVisibility(p, o).v[0];
+            } else {
+                samples = light.samples(p, o.samples, o.seed);
+                double sum = 0.0;
+                for (const Vec3& s : samples) sum += reference.transmittance(p, s)[0];
+                v = sum / samples.size();
+            }
+            f.v[i] = static_cast<float>(v);
+        }
+    });
+    f.seconds = seconds(start);
+    return f;
+}
+
+struct Difference {
+    double mean = 0.0, stddev = 0.0, max = 0.0;
+};
+
+/// Mean and standard deviation of |a - b| over receivers.
+Difference difference(const Frame& a, const Frame& b) {
+    double sum = 0.0, sumSquares = 0.0, worst = 0.0;
+    std::size_t n = 0;
+    for (std::size_t i = 0; i < a.v.size(); ++i) {
+        if (a.v[i] < 0.0f) continue;
+        const double d = std::abs(double(a.v[i]) - b.v[i]);
+        sum += d;
+        sumSquares += d * d;
+        worst = std::max(worst, d);
+        ++n;
+    }
+    Difference d;
+    if (n) {
+        d.mean = sum / n;
+        d.stddev = std::sqrt(std::max(0.0, sumSquares / n - d.mean * d.mean));
+        d.max = worst;
+    }
+    return d;
+}
+
+Json toJson(const Difference& d) { return Json{{"mean", d.mean}, {"stddev", d.stddev}, {"max", d.max}}; }
+
+/// Copies a frame into a cell of a contact sheet: visibility as grey
+/// (background dark blue), or with `reference` the signed difference x4 as
+/// red (too bright) and blue (too dark).
+void blit(dsm::FloatImage& sheet, std::uint32_t cellX, std::uint32_t cellY, std::uint32_t w, std::uint32_t h,
+          const Frame& f, const Frame* reference) {
+    for (std::uint32_t y = 0; y < h; ++y)
+        for (std::uint32_t x = 0; x < w; ++x) {
+            const std::size_t i = std::size_t(y) * w + x;
+            float rgb[3] = {0.05f, 0.05f, 0.15f};
+            if (f.v[i] >= 0.0f) {
+                if (reference) {
+                    const float d = 4.0f * (f.v[i] - reference->v[i]);
+                    rgb[0] = std::clamp(d, 0.0f, 1.0f);
+                    rgb[1] = 0.0f;
+                    rgb[2] = std::clamp(-d, 0.0f, 1.0f);
+                } else {
+                    rgb[0] = rgb[1] = rgb[2] = f.v[i];
+                }
+            }
+            for (int c = 0; c < 3; ++c) sheet.at(cellX * (w + 4) + x, cellY * (h + 4) + y, c) = rgb[c];
+        }
+}
+
+std::string stem(const std::string& path) {
+    std::string name = std::filesystem::path(path).filename().string();
+    return name.substr(0, name.find('.'));
+}
+
+Json runScene(const Config& config, const std::string& file, bool sweepKnobs) {
+    const std::string name = stem(file);
+    dsm::Scene scene = dsm::loadScene(file);
+    const dsm::ReferenceTracer reference(scene);
+    double scale = 1.0;
+    const Receivers receivers = viewReceivers(scene, reference, config, scale);
+    const double radii[] = {0.02 * scale, 0.05 * scale, 0.12 * scale};
+    const char* radiusNames[] = {"small", "medium", "large"};
+
+    // One map serves every radius: built for the largest light, so its
+    // push-back lets it see whatever any point of that light sees.
+    scene.light.areaLightRadius = radii[2];
+    dsm::BuildOptions build;
+    build.width = build.height = config.mapResolution;
+    build.samplesPerPixel = config.mapSpp;
+    build.mtsmLayers = config.mapLayers;
+    build.threads = config.threads;
+    const auto mapPath = config.workDir / (name + "-soft.dsm");
+    const dsm::BuildStats built = dsm::buildMap(scene, build, mapPath.string());
+    const auto map = dsm::DeepShadowMap::open(mapPath.string());
+    const double planeDepth = dsm::AreaLight::disk(map->info().camera, radii[2]).planeDepth();
+
+    Json out;
+    out["scene"] = name;
+    out["scale"] = scale;
+    out["map"] = {{"resolution", config.mapResolution},
+                  {"spp", config.mapSpp},
+                  {"layers", config.mapLayers},
+                  {"file_bytes", map->info().fileBytes},
+                  {"build_seconds", built.wallSeconds}};
+    out["image"] = {{"width", receivers.width}, {"height", receivers.height}};
+    dsm::SoftShadowOptions base;
+    // Against self-shadowing of surfaces whose depth varies across a filtered
+    // pixel (the ground seen obliquely; see the bias knob below).
+    base.bias = 0.015 * scale;
+    base.zThreshold = 0.003 * scale;
+    out["bias"] = base.bias;
+    out["z_threshold"] = base.zThreshold;
+
+    const std::uint32_t w = receivers.width, h = receivers.height;
+    dsm::FloatImage sheet((w + 4) * 5, (h + 4) * 3, 3, 0.0f);
+    Json rows = Json::array();
+    for (int ri = 0; ri < 3; ++ri) {
+        const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radii[ri], planeDepth);
+        const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+        for (const int n : config.samples) {
+            dsm::SoftShadowOptions o = base;
+            o.samples = n;
+            const Frame ref = render(Method::Reference, receivers, tracer, reference, light, o, config.threads);
+            const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads);
+            const Frame pcf = render(Method::Pcf, receivers, tracer, reference, light, o, config.threads);
+            const Difference dm = difference(mtsm, ref), dp = difference(pcf, ref);
+            rows.push_back({{"radius", radiusNames[ri]},
+                            {"radius_world", radii[ri]},
+                            {"samples", n},
+                            {"reference_seconds", ref.seconds},
+                            {"mtsm_seconds", mtsm.seconds},
+                            {"pcf_seconds", pcf.seconds},
+                            {"mtsm_error", toJson(dm)},
+                            {"pcf_error", toJson(dp)}});
+            std::printf("  %s %-6s N=%3d  reference %6.2f s | MTSM %6.2f s err %.4f±%.4f | PCF %6.2f s err %.4f±%.4f\n",
+                        name.c_str(), radiusNames[ri], n, ref.seconds, mtsm.seconds, dm.mean, dm.stddev, pcf.seconds,
+                        dp.mean, dp.stddev);
+            std::fflush(stdout);
+            if (n == config.samples.back()) {
+                blit(sheet, 0, ri, w, h, ref, nullptr);
+                blit(sheet, 1, ri, w, h, mtsm, nullptr);
+                blit(sheet, 2, ri, w, h, pcf, nullptr);
+                blit(sheet, 3, ri, w, h, mtsm, &ref);
+                blit(sheet, 4, ri, w, h, pcf, &ref);
+            }
+        }
+    }
+    out["rows"] = std::move(rows);
+    const std::string sheetName = "soft-" + name + ".png";
+    dsm::writeImage((config.images / sheetName).string(), sheet);
+    out["sheet"] = sheetName;
+
+    if (sweepKnobs) {
+        // The knobs of the trade at the medium radius: layers K, bias, samples N.
+        const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radii[1], planeDepth);
+        const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+        Json knobs = Json::array();
+        auto measure = [&](const char* knob, double value, const dsm::SoftShadowOptions& o) {
+            const Frame ref = render(Method::Reference, receivers, tracer, reference, light, o, config.threads);
+            const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads);
+            const Difference d = difference(mtsm, ref);
+            knobs.push_back({{"knob", knob},
+                             {"value", value},
+                             {"samples", o.samples},
+                             {"layers", o.layers},
+                             {"bias", o.bias},
+                             {"mtsm_seconds", mtsm.seconds},
+                             {"reference_seconds", ref.seconds},
+                             {"error", toJson(d)}});
+            std::printf("  %s knob %-7s %8.4g  MTSM %6.2f s  err %.4f±%.4f  (reference %.2f s)\n", name.c_str(), knob,
+                        value, mtsm.seconds, d.mean, d.stddev, ref.seconds);
+            std::fflush(stdout);
+        };
+        for (const int k : {1, 2, 4}) {
+            dsm::SoftShadowOptions o = base;
+            o.layers = k;
+            measure("layers", k, o);
+        }
+        for (const double f : {0.25, 1.0, 4.0}) {
+            dsm::SoftShadowOptions o = base;
+            o.bias = base.bias * f;
+            measure("bias", o.bias, o);
+        }
+        for (const int n : {16, 64, 256}) {
+            dsm::SoftShadowOptions o = base;
+            o.samples = n;
+            measure("samples", n, o);
+        }
+        out["knobs"] = std::move(knobs);
+    }
+    return out;
+}
+
+std::vector<std::string> splitList(const std::string& text) {
+    std::vector<std::string> out;
+    std::stringstream in(text);
+    for (std::string item; std::getline(in, item, ',');)
+        if (!item.empty()) out.push_back(item);
+    return out;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    Config config;
+    std::string outPath, scenes = std::string(DSM_SOFT_EXAMPLES_DIR) + "/hairball.json," + DSM_SOFT_EXAMPLES_DIR +
+                                  "/cloud-and-pipes.json," + DSM_SOFT_EXAMPLES_DIR + "/leaves.json";
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        const bool hasValue = i + 1 < argc;
+        if (a == "--smoke") config.smoke = true;
+        else if (a == "--out" && hasValue) outPath = argv[++i];
+        else if (a == "--images" && hasValue) config.images = argv[++i];
+        else if (a == "--scenes" && hasValue) scenes = argv[++i];
+        else if (a == "--threads" && hasValue) config.threads = static_cast<unsigned>(std::stoul(argv[++i]));
+        else {
+            std::fprintf(stderr, "usage: bench_soft_shadows --out FILE.json --images DIR [--smoke] [--scenes A,B] "
+                                 "[--threads T]\n");
+            return 2;
+        }
+    }
+    if (outPath.empty() || config.images.empty()) {
+        std::fprintf(stderr, "bench_soft_shadows: --out and --images are required\n");
+        return 2;
+    }
+    if (config.smoke) {
+        config.mapResolution = 32;
+        config.mapSpp = 4;
+        config.imageWidth = 24;
+        config.imageHeight = 18;
+        config.samples = {4, 16};
+    }
+    if (config.threads == 0) config.threads = std::max(1u, std::thread::hardware_concurrency());
+    config.scenes = splitList(scenes);
+    config.workDir = std::filesystem::temp_directory_path() / ("dsm-soft-" + std::to_string(::getpid()));
+    std::filesystem::create_directories(config.workDir);
+    std::filesystem::create_directories(config.images);
+    Json report;
+    int status = 0;
+    try {
+        report["smoke"] = config.smoke;
+        report["threads"] = config.threads;
+        report["scenes"] = Json::array();
+        for (std::size_t s = 0; s < config.scenes.size(); ++s) {
+            std::printf("soft shadows: %s\n", config.scenes[s].c_str());
+            report["scenes"].push_back(runScene(config, config.scenes[s], s == 0));
+        }
+        std::ofstream out(outPath);
+        out << report.dump(2) << "\n";
+        if (!out) throw std::runtime_error("cannot write " + outPath);
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "bench_soft_shadows: ERROR %s\n", e.what());
+        status = 1;
+    }
+    std::filesystem::remove_all(config.workDir);
+    return status;
+}

@@ -1,0 +1,164 @@
+#include "dsm/area_light.h"
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <numbers>
+
+#include "dsm/error.h"
+#include "text.h"
+
+namespace dsm {
+
+using detail::concat;
+
+namespace {
+
+std::uint64_t mix(std::uint64_t z) {
+    z ^= z >> 30;
+    z *= 0xBF58476D1CE4E5B9ull;
+    z ^= z >> 27;
+    z *= 0x94D049BB133111EBull;
+    return z ^ (z >> 31);
+}
+
+// SplitMix64: tiny, fast, and good enough for jitter.
+class Random {
+public:
+    explicit Random(std::uint64_t seed) : state_(seed) {}
+    std::uint64_t next() { return mix(state_ += 0x9E3779B97F4A7C15ull); }
+    double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
+
+private:
+    std::uint64_t state_;
+};
+
+// Shirley & Chiu's concentric map from [0,1)^2 to the unit disk: keeps
+// neighbouring strata neighbours, unlike the polar map.
+void concentricDisk(double u, double v, double& x, double& y) {
+    const double a = 2.0 * u - 1.0, b = 2.0 * v - 1.0;
+    if (a == 0.0 && b == 0.0) {
+        x = y = 0.0;
+        return;
+    }
+    double r, phi;
+    if (std::abs(a) > std::abs(b)) {
+        r = a;
+        phi = (std::numbers::pi / 4.0) * (b / a);
+    } else {
+        r = b;
+        phi = (std::numbers::pi / 2.0) - (std::numbers::pi / 4.0) * (a / b);
+    }
+    x = r * std::cos(phi);
+    y = r * std::sin(phi);
+}
+
+}  // namespace
+
+AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, double halfWidth, double halfHeight,
+                          double planeDepth) {
+    camera.validate();
+    const char* what = shape == AreaLightShape::Disk ? "disk" : "rectangle";
+    if (camera.projection != Projection::Perspective)
+        throw Error(concat("area light: the ", what, " needs a perspective (spot) light camera"));
+    if (!(halfWidth > 0.0) || !(halfHeight > 0.0) || !std::isfinite(halfWidth) || !std::isfinite(halfHeight))
+        throw Error(concat("area light: ", what, " size ", halfWidth, " x ", halfHeight, " is not finite and > 0"));
+    const auto& w = camera.screenWindow;
+    // Half-angles (as tangents) of the frustum about the axis, per axis.
+    const double tanX = std::min(w[1], -w[0]), tanY = std::min(w[3], -w[2]);
+    if (!(tanX > 0.0) || !(tanY > 0.0))
+        throw Error(concat("area light: the light camera's window [", w[0], ", ", w[1], "] x [", w[2], ", ", w[3],
+                           "] does not contain its axis"));
+    const double fit = std::max(halfWidth / tanX, halfHeight / tanY);  // smallest plane depth that fits
+    if (planeDepth < 0.0) planeDepth = fit;
+    if (!std::isfinite(planeDepth))
+        throw Error(concat("area light: plane depth ", planeDepth, " is not finite"));
+    // A light wider than the frustum at its plane sends rays the map never saw.
+    if (planeDepth < fit * (1.0 - 1e-9))
+        throw Error(concat("area light: the ", what, " (half-size ", halfWidth, " x ", halfHeight,
+                           ") does not fit the map's frustum at plane depth ", planeDepth, " (needs >= ", fit,
+                           "): the map was built for a smaller area light"));
+
+    // Inverse of the affine world-to-light matrix, by the adjugate.
+    const auto& m = camera.worldToLight;
+    const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], k = m[10];
+    const double det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g);
+    if (!(std::abs(det) > 1e-300) || !std::isfinite(det))
+        throw Error("area light: the light camera's world-to-light matrix is singular");
+    const double inv[9] = {(e * k - f * h) / det, (c * h - b * k) / det, (b * f - c * e) / det,
+                           (f * g - d * k) / det, (a * k - c * g) / det, (c * d - a * f) / det,
+                           (d * h - e * g) / det, (b * g - a * h) / det, (a * e - b * d) / det};
+    const double t[3] = {m[3], m[7], m[11]};
+
+    AreaLight light;
+    light.camera_ = camera;
+    light.shape_ = shape;
+    light.halfWidth_ = halfWidth;
+    light.halfHeight_ = halfHeight;
+    light.planeDepth_ = planeDepth;
+    for (int r = 0; r < 3; ++r) {
+        for (int col = 0; col < 3; ++col) light.lightToWorld_[4 * r + col] = inv[3 * r + col];
+        light.lightToWorld_[4 * r + 3] = -(inv[3 * r] * t[0] + inv[3 * r + 1] * t[1] + inv[3 * r + 2] * t[2]);
+    }
+    return light;
+}
+
+AreaLight AreaLight::disk(const LightCamera& camera, double radius, double planeDepth) {
+    return make(camera, AreaLightShape::Disk, radius, radius, planeDepth);
+}
+
+AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, double halfHeight, double planeDepth) {
+    return make(camera, AreaLightShape::Rectangle, halfWidth, halfHeight, planeDepth);
+}
+
+double AreaLight::area() const {
+    return shape_ == AreaLightShape::Disk ? std::numbers::pi * halfWidth_ * halfWidth_
+                                          : 4.0 * halfWidth_ * halfHeight_;
+}
+
+Vec3 AreaLight::lightToWorld(const Vec3& p) const {
+    const auto& m = lightToWorld_;
+    return {m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3], m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+            m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]};
+}
+
+void AreaLight::lightSpaceSamples(const Vec3& receiver, int count, std::uint64_t seed, std::vector<Vec3>& out) const {
+    out.clear();
+    if (count < 1) throw Error(concat("area light: sample count ", count, " is not >= 1"));
+    if (!std::isfinite(receiver[0]) || !std::isfinite(receiver[1]) || !std::isfinite(receiver[2]))
+        throw Error(concat("area light: receiver ", receiver[0], ",", receiver[1], ",", receiver[2], " is not finite"));
+    // Seeded by the receiver's bits (+0.0 and -0.0 alike), so the samples of
+    // a point never change between frames or threads.
+    std::uint64_t s = mix(seed ^ 0x5DEECE66Dull);
+    for (double q : receiver) s = mix(s ^ std::bit_cast<std::uint64_t>(q == 0.0 ? 0.0 : q));
+    Random rng(s);
+    const auto n = static_cast<std::uint32_t>(count);
+    const std::uint32_t gy = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(n)))));
+    const std::uint32_t gx = (n + gy - 1) / gy;
+    std::vector<std::uint32_t> cells(std::size_t(gx) * gy);
+    for (std::uint32_t k = 0; k < cells.size(); ++k) cells[k] = k;
+    if (cells.size() > n)
+        for (std::uint32_t k = 0; k < n; ++k) std::swap(cells[k], cells[k + rng.next() % (cells.size() - k)]);
+    out.reserve(n);
+    for (std::uint32_t k = 0; k < n; ++k) {
+        const double u = (cells[k] % gx + rng.uniform()) / gx;
+        const double v = (cells[k] / gx + rng.uniform()) / gy;
+        double x, y;
+        if (shape_ == AreaLightShape::Disk) {
+            concentricDisk(u, v, x, y);
+        } else {
+            x = 2.0 * u - 1.0;
+            y = 2.0 * v - 1.0;
+        }
+        out.push_back({x * halfWidth_, y * halfHeight_, planeDepth_});
+    }
+}
+
+std::vector<Vec3> AreaLight::samples(const Vec3& receiverWorld, int count, std::uint64_t seed) const {
+    std::vector<Vec3> light;
+    lightSpaceSamples(receiverWorld, count, seed, light);
+    for (Vec3& p : light) p = lightToWorld(p);
+    return light;
+}
+
+}  // namespace dsm

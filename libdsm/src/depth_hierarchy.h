@@ -1,0 +1,89 @@
+// A min/max depth quadtree over level 0 of a map, for ray tracing it
+// (Xie et al. 2007 §4.3; Curtis 2009 §3.5) (internal).
+//
+// Node (g, x, y) covers the level-0 pixels [x 2^g, (x+1) 2^g) x [y 2^g,
+// (y+1) 2^g) and holds the smallest and largest vertex depth of the functions
+// in it (all layers). Three parts, so opening a map reads no tile:
+//  - g >= tileLevel: a pyramid over the tile grid, built at construction from
+//    the tile directory's minZ/maxZ;
+//  - 1 <= g < tileLevel: a mini-pyramid per tile, built the first time a ray
+//    descends into the tile and kept (published with an atomic pointer, so
+//    any number of threads may ask at once; two threads may both build one
+//    and one copy is dropped, which costs time, never correctness);
+//  - g = 0: the pixel itself, which the caller reads anyway.
+#pragma once
+
+#include <atomic>
+#include <cstdint>
+#include <limits>
+#include <memory>
+#include <vector>
+
+#include "dsm/reader.h"
+
+namespace dsm::detail {
+
+struct DepthRange {
+    float min = std::numeric_limits<float>::infinity();
+    float max = -std::numeric_limits<float>::infinity();
+    bool empty() const { return !(min <= max); }
+    void add(const DepthRange& o) {
+        min = std::min(min, o.min);
+        max = std::max(max, o.max);
+    }
+};
+
+class DepthHierarchy {
+public:
+    /// Reads the tile directory of `map` (kept alive by the caller).
+    explicit DepthHierarchy(const DeepShadowMap& map);
+    ~DepthHierarchy();
+    DepthHierarchy(const DepthHierarchy&) = delete;
+    DepthHierarchy& operator=(const DepthHierarchy&) = delete;
+
+    /// The level whose single node (0, 0) covers the whole map.
+    int topLevel() const { return topLevel_; }
+    int tileLevel() const { return tileLevel_; }
+    std::uint32_t width() const { return width_; }
+    std::uint32_t height() const { return height_; }
+
+    /// Range of node (g, x, y), 1 <= g <= topLevel(), the node inside the map.
+    /// May read and decode a tile (through the map's cache); throws what the
+    /// reader throws.
+    DepthRange node(int g, std::uint32_t x, std::uint32_t y) const;
+
+    /// A lower bound on the depths of the pixels meeting the raster rectangle
+    /// [x0, x1] x [y0, y1] (clamped to the map): the smallest node minimum over
+    /// nodes inside the rectangle, descending where a node straddles its edge
+    /// down to 2 x 2 pixel nodes (so the bound may include pixels one beyond
+    /// the edge). Skips nodes that cannot lower the bound found so far, so the
+    /// cost grows with the rectangle's perimeter, not its area. +infinity when
+    /// the rectangle holds no vertex.
+    float minDepth(double x0, double y0, double x1, double y1) const;
+
+    /// Mini-pyramids built so far (for tests and statistics).
+    std::size_t tilesBuilt() const { return built_.load(std::memory_order_relaxed); }
+
+private:
+    struct TilePyramid;
+    struct PixelRect {
+        std::uint32_t x0, y0, x1, y1;  // inclusive
+    };
+    void lowerMin(int g, std::uint32_t x, std::uint32_t y, const PixelRect& rect, float& best) const;
+    const TilePyramid& tilePyramid(std::uint32_t tx, std::uint32_t ty) const;
+
+    const DeepShadowMap& map_;
+    std::uint32_t width_ = 0, height_ = 0, tileSize_ = 0, tilesX_ = 0, tilesY_ = 0;
+    int tileLevel_ = 0;
+    int topLevel_ = 0;
+    // Tile-grid pyramid: gridLevels_[h] has dims ceil(tilesX / 2^h) x ...
+    struct GridLevel {
+        std::uint32_t width = 0, height = 0;
+        std::vector<DepthRange> ranges;
+    };
+    std::vector<GridLevel> gridLevels_;
+    std::unique_ptr<std::atomic<const TilePyramid*>[]> tiles_;
+    mutable std::atomic<std::size_t> built_{0};
+};
+
+}  // namespace dsm::detail
