@@ -211,6 +211,30 @@ TEST(AreaLight, DerivedPlaneIsTheScenesPushBack) {
     EXPECT_THROW(dsm::AreaLight::rectangle(camera, 0.0, 1.0), dsm::Error);
 }
 
+TEST(AreaLight, ForMapPlacesTheLightWhereTheBuildPutIt) {
+    TempDir dir;
+    const BuiltMap m = build(dir, "for-map", {});
+    const dsm::MapInfo& info = m.map->info();
+    EXPECT_DOUBLE_EQ(dsm::AreaLight::recordedRadius(info), kLightRadius);
+    const double built = dsm::AreaLight::disk(info.camera, kLightRadius).planeDepth();
+    // A smaller light keeps the build's plane (its own push-back would differ).
+    const auto small = dsm::AreaLight::forMap(info, dsm::AreaLightShape::Disk, 0.5 * kLightRadius, 0.0);
+    EXPECT_DOUBLE_EQ(small.planeDepth(), built);
+    EXPECT_DOUBLE_EQ(small.halfWidth(), 0.5 * kLightRadius);
+    const auto rect = dsm::AreaLight::forMap(info, dsm::AreaLightShape::Rectangle, 0.3, 0.2);
+    EXPECT_EQ(rect.shape(), dsm::AreaLightShape::Rectangle);
+    EXPECT_DOUBLE_EQ(rect.planeDepth(), built);
+    EXPECT_THROW(dsm::AreaLight::forMap(info, dsm::AreaLightShape::Disk, 2.0 * kLightRadius, 0.0), dsm::Error);
+    // Without a recorded radius the push-back follows the requested light.
+    dsm::MapInfo bare = info;
+    bare.metadata = "{}";
+    EXPECT_EQ(dsm::AreaLight::recordedRadius(bare), 0.0);
+    bare.metadata = "not json";
+    EXPECT_EQ(dsm::AreaLight::recordedRadius(bare), 0.0);
+    bare.metadata = R"({"scene_json": "{\"light\": {\"area_radius\": 0.25}}"})";
+    EXPECT_DOUBLE_EQ(dsm::AreaLight::recordedRadius(bare), 0.25);
+}
+
 TEST(AreaLight, SamplesAreStratifiedOnTheLightAndSeededByTheReceiver) {
     dsm::LightDescription light;
     light.position = {0.0, 10.0, 0.0};

@@ -1,5 +1,7 @@
 #include "dsm/area_light.h"
 
+#include <nlohmann/json.hpp>
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -109,6 +111,29 @@ AreaLight AreaLight::disk(const LightCamera& camera, double radius, double plane
 
 AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, double halfHeight, double planeDepth) {
     return make(camera, AreaLightShape::Rectangle, halfWidth, halfHeight, planeDepth);
+}
+
+double AreaLight::recordedRadius(const MapInfo& info) {
+    const nlohmann::json metadata = nlohmann::json::parse(info.metadata, nullptr, /*allow_exceptions=*/false);
+    if (!metadata.is_object()) return 0.0;
+    const auto number = [](const nlohmann::json& j) { return j.is_number() ? j.get<double>() : 0.0; };
+    const auto settings = metadata.find("settings");
+    if (settings != metadata.end() && settings->is_object() && settings->contains("area_light_radius"))
+        return number((*settings)["area_light_radius"]);
+    const auto scene = metadata.find("scene_json");
+    if (scene != metadata.end() && scene->is_string()) {
+        const nlohmann::json parsed = nlohmann::json::parse(scene->get<std::string>(), nullptr, false);
+        if (parsed.is_object() && parsed.contains("light") && parsed["light"].is_object() &&
+            parsed["light"].contains("area_radius"))
+            return number(parsed["light"]["area_radius"]);
+    }
+    return 0.0;
+}
+
+AreaLight AreaLight::forMap(const MapInfo& info, AreaLightShape shape, double halfWidth, double halfHeight) {
+    const double built = recordedRadius(info);
+    const double planeDepth = built > 0.0 ? disk(info.camera, built).planeDepth() : -1.0;
+    return make(info.camera, shape, halfWidth, shape == AreaLightShape::Disk ? halfWidth : halfHeight, planeDepth);
 }
 
 double AreaLight::area() const {

@@ -133,6 +133,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
               {"filter_width", options.filterWidth},
               {"tile_size", options.tileSize},
               {"mtsm_layers", options.mtsmLayers},
+              {"area_light_radius", light.areaLightRadius},
               {"seed", options.seed},
               {"region", region}}}};
         if (scene.source.size() <= 65536) m["scene_json"] = scene.source;

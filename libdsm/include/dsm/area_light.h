@@ -52,6 +52,17 @@ public:
     static AreaLight rectangle(const LightCamera& camera, double halfWidth, double halfHeight,
                                double planeDepth = -1.0);
 
+    /// A light of the given shape and half-sizes for a map, placed where the
+    /// map's build put its light: the plane depth follows from the area-light
+    /// radius recorded in the map's metadata (settings.area_light_radius,
+    /// written by buildMap; or the light's area_radius in the scene JSON the
+    /// map keeps). A map that records none gets the push-back derived from the
+    /// requested size, as disk() and rectangle() do. Throws dsm::Error when the
+    /// light does not fit the map (callers add the file's name).
+    static AreaLight forMap(const MapInfo& info, AreaLightShape shape, double halfWidth, double halfHeight);
+    /// The area-light radius a map was built for (0 when it records none).
+    static double recordedRadius(const MapInfo& info);
+
     AreaLightShape shape() const { return shape_; }
     /// Half-size along light x (the radius of a disk).
     double halfWidth() const { return halfWidth_; }
