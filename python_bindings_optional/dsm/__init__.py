@@ -112,6 +112,22 @@ class Map:
                                           level, float(bias), int(threads))
         return (values, bounds) if error_bound else values
 
+    def soft_shadow(self, points, light: str, samples: int = 64, layers: int = 0, bias: float = 0.0,
+                    z_threshold: float = 0.0, seed: int = 1, method: str = "mtsm", threads: int = 0):
+        """Fraction of an area light visible from each world point of an
+        (N, 3) array, like ``dsm-lookup --area-light``.
+
+        light: "disk:R" (radius) or "rect:W,H" (full sizes), centred on the
+        map's light where its build put it (the map should be built with the
+        light's area_radius and mtsm_layers > 1). method: "mtsm" traces
+        `samples` rays per point through the map as a multilayer transparent
+        shadow map (layers K: 0 = all; z_threshold and bias in light depth
+        units); "pcf" is the classic filtered-lookup baseline. Returns (N,) or
+        (N, 3) like lookup(). Deterministic for a seed.
+        """
+        return self._map.soft_shadow(np.asarray(points, dtype=np.float64), str(light), int(samples), int(layers),
+                                     float(bias), float(z_threshold), int(seed), str(method), int(threads))
+
     def cache_stats(self) -> dict:
         """Counters of the tile cache this map reads through."""
         return self._map.cache_stats()

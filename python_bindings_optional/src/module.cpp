@@ -18,6 +18,7 @@
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
 
+#include "dsm/area_light.h"
 #include "dsm/error.h"
 #include "dsm/lookup.h"
 #include "dsm/map_info.h"
@@ -25,6 +26,7 @@
 #include "dsm/reader.h"
 #include "dsm/sampler.h"
 #include "dsm/scene.h"
+#include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
 
 namespace py = pybind11;
@@ -207,6 +209,46 @@ public:
         return py::make_tuple(valueArray, boundArray);
     }
 
+    /// Soft shadows of an area light at world points (N, 3): MTSM ray tracing
+    /// of the map, or the PCF baseline. `light` is "disk:R" or "rect:W,H"
+    /// (full sizes). Returns values shaped like lookup()'s.
+    py::array_t<double> softShadow(const py::array_t<double, py::array::c_style | py::array::forcecast>& points,
+                                   const std::string& light, int samples, int layers, double bias, double zThreshold,
+                                   std::uint64_t seed, const std::string& method, int threads) const {
+        if (points.ndim() != 2 || points.shape(1) != 3)
+            throw py::value_error("points must be an array of shape (N, 3)");
+        if (method != "mtsm" && method != "pcf") throw py::value_error("method must be 'mtsm' or 'pcf'");
+        const dsm::AreaLight area = parseLight(light);
+        dsm::SoftShadowOptions options;
+        options.samples = samples;
+        options.layers = layers;
+        options.bias = bias;
+        options.zThreshold = zThreshold;
+        options.seed = seed;
+        const bool pcf = method == "pcf";
+        const std::size_t n = static_cast<std::size_t>(points.shape(0));
+        const int channels = info().channels;
+        std::vector<double> input(points.data(), points.data() + 3 * n);
+        std::vector<double> values(n * static_cast<std::size_t>(channels));
+        {
+            py::gil_scoped_release released;
+            const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map_, area);
+            parallelChunks(n, workerCount(threads, n * static_cast<std::size_t>(std::max(1, samples))),
+                           [&](std::size_t begin, std::size_t end) {
+                dsm::SoftShadowContext context(tracer);
+                for (std::size_t i = begin; i < end; ++i) {
+                    const dsm::Vec3 p{input[3 * i], input[3 * i + 1], input[3 * i + 2]};
+                    const dsm::SoftShadowResult r = pcf ? context.pcfVisibility(p, options) : context.visibility(p, options);
+                    for (int c = 0; c < channels; ++c) values[i * channels + c] = r.v[c];
+                }
+            });
+        }
+        py::array_t<double> out = channels == 1 ? py::array_t<double>({static_cast<py::ssize_t>(n)})
+                                                : py::array_t<double>({static_cast<py::ssize_t>(n), py::ssize_t{3}});
+        std::copy(values.begin(), values.end(), out.mutable_data());
+        return out;
+    }
+
     py::dict cacheStats() const {
         const dsm::TileCacheStats s = map_->cache().stats();
         py::dict d;
@@ -222,6 +264,34 @@ public:
     }
 
     const std::shared_ptr<dsm::DeepShadowMap>& handle() const { return map_; }
+
+private:
+    /// "disk:R" or "rect:W,H", placed where the map's build put its light.
+    dsm::AreaLight parseLight(const std::string& text) const {
+        const auto colon = text.find(':');
+        const std::string shape = text.substr(0, colon);
+        std::vector<double> sizes;
+        if (colon != std::string::npos) {
+            std::size_t at = colon + 1;
+            while (at <= text.size()) {
+                const std::size_t comma = std::min(text.find(',', at), text.size());
+                try {
+                    std::size_t used = 0;
+                    const std::string field = text.substr(at, comma - at);
+                    sizes.push_back(std::stod(field, &used));
+                    if (used != field.size()) throw std::invalid_argument(field);
+                } catch (const std::exception&) {
+                    throw py::value_error("light must be 'disk:R' or 'rect:W,H', not '" + text + "'");
+                }
+                at = comma + 1;
+            }
+        }
+        if (shape == "disk" && sizes.size() == 1)
+            return dsm::AreaLight::forMap(info(), dsm::AreaLightShape::Disk, sizes[0], sizes[0]);
+        if (shape == "rect" && sizes.size() == 2)
+            return dsm::AreaLight::forMap(info(), dsm::AreaLightShape::Rectangle, 0.5 * sizes[0], 0.5 * sizes[1]);
+        throw py::value_error("light must be 'disk:R' or 'rect:W,H', not '" + text + "'");
+    }
 
 private:
     std::shared_ptr<dsm::DeepShadowMap> map_;
@@ -308,6 +378,9 @@ PYBIND11_MODULE(_dsm, m) {
         .def("pixel", &Map::pixel, py::arg("x"), py::arg("y"), py::arg("level") = 0)
         .def("lookup", &Map::lookup, py::arg("points"), py::arg("space"), py::arg("filter"), py::arg("filter_width"),
              py::arg("level"), py::arg("bias"), py::arg("threads"))
+        .def("soft_shadow", &Map::softShadow, py::arg("points"), py::arg("light"), py::arg("samples"),
+             py::arg("layers"), py::arg("bias"), py::arg("z_threshold"), py::arg("seed"), py::arg("method"),
+             py::arg("threads"))
         .def("cache_stats", &Map::cacheStats);
 
     m.def("build", &build, py::arg("scene_text"), py::arg("base_directory"), py::arg("scene_name"),
