@@ -225,10 +225,11 @@ TEST(AreaLight, ForMapPlacesTheLightWhereTheBuildPutIt) {
     EXPECT_EQ(rect.shape(), dsm::AreaLightShape::Rectangle);
     EXPECT_DOUBLE_EQ(rect.planeDepth(), built);
     EXPECT_THROW(dsm::AreaLight::forMap(info, dsm::AreaLightShape::Disk, 2.0 * kLightRadius, 0.0), dsm::Error);
-    // Without a recorded radius the push-back follows the requested light.
+    // Without a recorded radius there is no light plane to put it on.
     dsm::MapInfo bare = info;
     bare.metadata = "{}";
     EXPECT_EQ(dsm::AreaLight::recordedRadius(bare), 0.0);
+    EXPECT_THROW(dsm::AreaLight::forMap(bare, dsm::AreaLightShape::Disk, 0.5, 0.0), dsm::Error);
     bare.metadata = "not json";
     EXPECT_EQ(dsm::AreaLight::recordedRadius(bare), 0.0);
     bare.metadata = R"({"scene_json": "{\"light\": {\"area_radius\": 0.25}}"})";

@@ -131,9 +131,15 @@ double AreaLight::recordedRadius(const MapInfo& info) {
 }
 
 AreaLight AreaLight::forMap(const MapInfo& info, AreaLightShape shape, double halfWidth, double halfHeight) {
+    // A distant light first gets make()'s own complaint: it has no position.
+    if (info.camera.projection != Projection::Perspective)
+        return make(info.camera, shape, halfWidth, halfHeight, -1.0);
     const double built = recordedRadius(info);
-    const double planeDepth = built > 0.0 ? disk(info.camera, built).planeDepth() : -1.0;
-    return make(info.camera, shape, halfWidth, shape == AreaLightShape::Disk ? halfWidth : halfHeight, planeDepth);
+    if (!(built > 0.0))
+        throw Error("area light: the map records no area-light radius (build it from a scene whose light has "
+                    "area_radius); its light is a point");
+    return make(info.camera, shape, halfWidth, shape == AreaLightShape::Disk ? halfWidth : halfHeight,
+                disk(info.camera, built).planeDepth());
 }
 
 double AreaLight::area() const {

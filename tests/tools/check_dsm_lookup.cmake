@@ -1,10 +1,10 @@
 # Runs dsm-lookup and checks one behaviour.
 #
 #   cmake -DCHECK=<check> -DDSM_LOOKUP=<dsm-lookup> -DMAKE_SAMPLE_MAP=<make_sample_map>
-#         -DLOOKUP_REFERENCE=<lookup_reference> [-DPYTHON=<python3>]
+#         -DLOOKUP_REFERENCE=<lookup_reference> [-DPYTHON=<python3>] [-DDSM_BUILD=<dsm-build>]
 #         -DWORK_DIR=<fresh dir> -DVERSION=<project version> -P check_dsm_lookup.cmake
 #
-# Two maps:
+# Two maps, and for the soft_* checks (--area-light) a third built here:
 #  - mono.dsm (lookup_reference --write-mono): 8 x 8, tiles of 4, 2 levels,
 #    exact (tolerance 0), orthographic, light = world + (1, -2, 0.5), raster =
 #    (lx, 8 - ly). Pixel (i, j): V = 1 up to z = 1, linear down to k/16 at
@@ -14,6 +14,12 @@
 #    Its answers are compared with lookup_reference, which prints what
 #    dsm::LookupContext returns, and at a few pixels with the values
 #    make_sample_map writes.
+#  - soft.dsm (dsm-build, see build_soft_map): a spot light at height 10
+#    looking down, fov 60, area_radius 1, over a plane at height 0 with an
+#    opaque square of half-size 1 at height 5; 64 x 64, 16 spp, 2 layers. By
+#    similar triangles a receiver on the plane is in the umbra for |x|, |z| < 1
+#    (every light ray crosses the square), in the penumbra for 1 < |x| < 3
+#    (z = 0), lit beyond. Values are compared with lookup_reference --soft.
 cmake_minimum_required(VERSION 3.25)
 
 foreach(var CHECK DSM_LOOKUP MAKE_SAMPLE_MAP LOOKUP_REFERENCE WORK_DIR VERSION)
@@ -100,6 +106,62 @@ function(expect_one_error_line file)
   if(NOT at EQUAL 0)
     fail("expected stderr to start with \"dsm-lookup: ERROR '${file}': \"")
   endif()
+endfunction()
+
+# soft_reference(map space shape w h method samples layers z bias seed text):
+# lookup_reference --soft's answers, in REFERENCE (all columns) and
+# REFERENCE_VALUES (the visibility columns only, as the tool's CSV prints them).
+function(soft_reference map space shape w h method samples layers z bias seed text)
+  set(file "${WORK_DIR}/soft_reference_points.txt")
+  file(WRITE "${file}" "${text}")
+  execute_process(COMMAND "${LOOKUP_REFERENCE}" --soft "${map}" ${space} ${shape} ${w} ${h} ${method} ${samples}
+                          ${layers} ${z} ${bias} ${seed}
+    INPUT_FILE "${file}" RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "lookup_reference --soft failed (${rc}): ${err}")
+  endif()
+  set(REFERENCE "${out}" PARENT_SCOPE)
+  string(REGEX REPLACE ",[^,
+]*,[^,
+]*
+" "
+" values "${out}")
+  set(REFERENCE_VALUES "${values}" PARENT_SCOPE)
+endfunction()
+
+# build_soft_map(out radius): the soft-shadow scene of the file's head as a
+# map; radius 0 leaves out area_radius.
+function(build_soft_map out radius)
+  if(NOT DSM_BUILD)
+    message(FATAL_ERROR "check_dsm_lookup.cmake: -DDSM_BUILD=... is required for the soft_* checks")
+  endif()
+  set(area "")
+  if(NOT radius EQUAL 0)
+    set(area ", \"area_radius\": ${radius}")
+  endif()
+  set(scene "${WORK_DIR}/soft_scene_${radius}.json")
+  file(WRITE "${scene}" "{\"light\": {\"type\": \"spot\", \"position\": [0, 10, 0], \"direction\": [0, -1, 0],
+  \"up\": [0, 0, 1], \"fov\": 60, \"resolution\": 64${area}},
+ \"objects\": [{\"type\": \"plane\", \"center\": [0, 0, 0], \"normal\": [0, 1, 0], \"size\": 40},
+             {\"type\": \"quad\", \"center\": [0, 5, 0], \"u\": [1, 0, 0], \"v\": [0, 0, 1]}]}
+")
+  execute_process(COMMAND "${DSM_BUILD}" "${scene}" -o "${out}" --spp 16 --mtsm-layers 2 --threads 2 --quiet
+    RESULT_VARIABLE rc ERROR_VARIABLE err)
+  if(NOT rc EQUAL 0)
+    message(FATAL_ERROR "dsm-build failed (${rc}): ${err}")
+  endif()
+endfunction()
+
+# Receivers on the soft map's plane: under the square, in the penumbra and
+# beyond it.
+set(SOFT_UMBRA "0 0 0\n0.3 0 -0.2\n-0.6 0 0.5\n")
+set(SOFT_PENUMBRA "1.5 0 0\n2 0 0\n2.5 0 0\n-2 0 0.3\n0.2 0 1.8\n1.6 0 1.6\n")
+set(SOFT_LIT "5 0 0\n-4.5 0 1\n0 0 -5\n3.6 0 3.6\n")
+
+# Every line of a variable's value as a list.
+function(split_lines var result)
+  string(REGEX MATCHALL "[^\n]+" lines "${${var}}")
+  set(${result} "${lines}" PARENT_SCOPE)
 endfunction()
 
 # ---------------------------------------------------------------------------
@@ -223,6 +285,10 @@ endif()
 execute_process(COMMAND "${MAKE_SAMPLE_MAP}" "${RGB}" RESULT_VARIABLE rc ERROR_VARIABLE err)
 if(NOT rc EQUAL 0)
   message(FATAL_ERROR "make_sample_map failed (${rc}): ${err}")
+endif()
+set(SOFT "${WORK_DIR}/soft.dsm")
+if(CHECK MATCHES "^soft_")
+  build_soft_map("${SOFT}" 1)
 endif()
 
 # ---------------------------------------------------------------------------
@@ -706,7 +772,8 @@ elseif(CHECK STREQUAL "help")
   expect_rc(0)
   expect_empty(ERR)
   foreach(option --input --point --space --filter-width --filter --level --bias --format --header --error-bound
-                 --strict --stats --cache-mb --version docs/dsm-lookup.md)
+                 --strict --stats --cache-mb --area-light --light-samples --layers --z-threshold --seed --soft
+                 --version docs/dsm-lookup.md)
     expect_contains(OUT "${option}")
   endforeach()
 
@@ -763,6 +830,206 @@ elseif(CHECK STREQUAL "not_a_map")
   expect_empty(OUT)
   expect_one_error_line("${text}")
   expect_contains(ERR "not a deep shadow map")
+
+elseif(CHECK STREQUAL "soft_values")
+  # Umbra near 0, lit exactly 1, penumbra strictly between: all the library's answers.
+  query("${SOFT_UMBRA}${SOFT_PENUMBRA}${SOFT_LIT}" "${SOFT}" --area-light disk:1 --bias 0.05)
+  expect_rc(0)
+  expect_empty(ERR)
+  soft_reference("${SOFT}" world disk 1 1 mtsm 64 0 0 0.05 1 "${SOFT_UMBRA}${SOFT_PENUMBRA}${SOFT_LIT}")
+  expect_equal(OUT "${REFERENCE_VALUES}")
+  split_lines(OUT values)
+  list(SUBLIST values 0 3 umbra)
+  list(SUBLIST values 3 6 penumbra)
+  list(SUBLIST values 9 4 lit)
+  foreach(v IN LISTS umbra)
+    if(v GREATER 0.05)
+      fail("umbra value ${v} is not near 0")
+    endif()
+  endforeach()
+  foreach(v IN LISTS penumbra)
+    if(NOT (v GREATER 0.05 AND v LESS 0.95))
+      fail("penumbra value ${v} is not strictly between 0 and 1")
+    endif()
+  endforeach()
+  foreach(v IN LISTS lit)
+    if(NOT v STREQUAL "1")
+      fail("lit value ${v} is not exactly 1")
+    endif()
+  endforeach()
+  # Visibility grows from the umbra's edge outwards (x = 1.5, 2, 2.5).
+  list(GET penumbra 0 a)
+  list(GET penumbra 1 b)
+  list(GET penumbra 2 c)
+  if(NOT (a LESS b AND b LESS c))
+    fail("penumbra values ${a}, ${b}, ${c} do not grow away from the square")
+  endif()
+  # Every soft option reaches the library: samples, layers, z threshold, seed; and light-space points.
+  query("${SOFT_PENUMBRA}" "${SOFT}" --area-light disk:0.8 --light-samples 100 --layers 1 --z-threshold 0.01
+        --bias 0.1 --seed 5)
+  expect_rc(0)
+  soft_reference("${SOFT}" world disk 0.8 0.8 mtsm 100 1 0.01 0.1 5 "${SOFT_PENUMBRA}")
+  expect_equal(OUT "${REFERENCE_VALUES}")
+  set(light_points "0.5 0.3 11.73\n2 0 11.73\n-1.7 1.1 11.73\n")
+  query("${light_points}" "${SOFT}" --area-light disk:1 --space light --bias 0.05)
+  expect_rc(0)
+  soft_reference("${SOFT}" light disk 1 1 mtsm 64 0 0 0.05 1 "${light_points}")
+  expect_equal(OUT "${REFERENCE_VALUES}")
+
+elseif(CHECK STREQUAL "soft_pcf")
+  # The PCF baseline: the library's pcfVisibility, not the traced answer in the penumbra.
+  query("${SOFT_PENUMBRA}" "${SOFT}" --area-light disk:1 --bias 0.05 --soft pcf)
+  expect_rc(0)
+  expect_empty(ERR)
+  set(pcf "${OUT}")
+  soft_reference("${SOFT}" world disk 1 1 pcf 64 0 0 0.05 1 "${SOFT_PENUMBRA}")
+  expect_equal(pcf "${REFERENCE_VALUES}")
+  query("${SOFT_PENUMBRA}" "${SOFT}" --area-light disk:1 --bias 0.05 --soft mtsm)
+  split_lines(pcf pcf_values)
+  split_lines(OUT mtsm_values)
+  foreach(k RANGE 5)
+    list(GET pcf_values ${k} p)
+    list(GET mtsm_values ${k} m)
+    if(p STREQUAL m)
+      fail("pcf and mtsm agree (${p}) at penumbra point ${k}")
+    endif()
+  endforeach()
+  # JSON shows the blocker depth and filter width it used.
+  query("2 0 0\n" "${SOFT}" --area-light disk:1 --bias 0.05 --soft pcf --format json)
+  expect_rc(0)
+  soft_reference("${SOFT}" world disk 1 1 pcf 64 0 0 0.05 1 "2 0 0\n")
+  string(REPLACE "," ";" fields "${REFERENCE}")
+  string(STRIP "${fields}" fields)
+  list(GET fields 0 v)
+  list(GET fields 1 depth)
+  list(GET fields 2 width)
+  expect_equal(OUT "{\"line\":1,\"v\":${v},\"blocker_depth\":${depth},\"filter_width\":${width}}\n")
+
+elseif(CHECK STREQUAL "soft_determinism")
+  # The same answers on every run, from --point and from a file alike.
+  set(points "${SOFT_UMBRA}${SOFT_PENUMBRA}${SOFT_LIT}")
+  query("${points}" "${SOFT}" --area-light disk:1 --bias 0.05 --light-samples 16)
+  expect_rc(0)
+  set(first "${OUT}")
+  query("${points}" "${SOFT}" --area-light disk:1 --bias 0.05 --light-samples 16)
+  expect_equal(OUT "${first}")
+  split_lines(first values)
+  list(GET values 4 at_2)
+  run("${SOFT}" --area-light disk:1 --bias 0.05 --light-samples 16 --point 2,0,0)
+  expect_equal(OUT "${at_2}\n")
+  # Another seed draws other light samples: another penumbra estimate.
+  query("${points}" "${SOFT}" --area-light disk:1 --bias 0.05 --light-samples 16 --seed 2)
+  expect_rc(0)
+  if(OUT STREQUAL first)
+    fail("--seed 2 gave the answers of seed 1")
+  endif()
+
+elseif(CHECK STREQUAL "soft_rect")
+  # A rectangle 2 wide and 1 high (half-sizes 1 and 0.5): the library's answers, not the disk's.
+  query("${SOFT_PENUMBRA}" "${SOFT}" --area-light rect:2,1 --bias 0.05)
+  expect_rc(0)
+  expect_empty(ERR)
+  soft_reference("${SOFT}" world rect 2 1 mtsm 64 0 0 0.05 1 "${SOFT_PENUMBRA}")
+  expect_equal(OUT "${REFERENCE_VALUES}")
+  set(rect "${OUT}")
+  query("${SOFT_PENUMBRA}" "${SOFT}" --area-light disk:1 --bias 0.05)
+  if(OUT STREQUAL rect)
+    fail("rect:2,1 gave the disk's answers")
+  endif()
+  # Full sizes, not half-sizes: rect:0.5,2 is half 0.25 x 1 (light x is world x here).
+  query("2.5 0 0\n" "${SOFT}" --area-light rect:0.5,2 --bias 0.05)
+  expect_rc(0)
+  soft_reference("${SOFT}" world rect 0.5 2 mtsm 64 0 0 0.05 1 "2.5 0 0\n")
+  expect_equal(OUT "${REFERENCE_VALUES}")
+
+elseif(CHECK STREQUAL "soft_output")
+  # CSV header, JSON details, bad lines, --strict and --stats as for point lookups.
+  query("2 0 0\n" "${SOFT}" --area-light disk:1 --bias 0.05 --header)
+  expect_rc(0)
+  expect_matches(OUT "^v\n0\\.[0-9]+\n$")
+  query("# comment\n2 0 0\n5 0 0\n" "${SOFT}" --area-light disk:1 --bias 0.05 --format json)
+  expect_rc(0)
+  soft_reference("${SOFT}" world disk 1 1 mtsm 64 0 0 0.05 1 "2 0 0\n5 0 0\n")
+  split_lines(REFERENCE_VALUES values)
+  list(GET values 0 v)
+  expect_equal(OUT "{\"line\":2,\"v\":${v},\"rays\":64,\"classified_lit\":false}\n{\"line\":3,\"v\":1,\"rays\":0,\"classified_lit\":true}\n")
+  set(text "2 0 0\n1 2\n5 0 0\n")
+  query("${text}" "${SOFT}" --area-light disk:1 --bias 0.05)
+  expect_rc(1)
+  expect_equal(OUT "${v}\nnan\n1\n")
+  expect_lines(ERR 1)
+  expect_contains(ERR "line 2: expected 3 numbers (x y z), found 2 fields\n")
+  query("${text}" "${SOFT}" --area-light disk:1 --bias 0.05 --strict)
+  expect_rc(1)
+  expect_equal(OUT "${v}\nnan\n")
+  query("${SOFT_UMBRA}${SOFT_LIT}" "${SOFT}" --area-light disk:1 --bias 0.05 --stats)
+  expect_rc(0)
+  expect_lines(ERR 3)
+  expect_contains(ERR "dsm-lookup: stats: 7 queries (0 bad)")
+  # The lit points are classified lit; the umbra's are traced, 64 rays each.
+  expect_matches(ERR "\ndsm-lookup: stats: soft 7 queries \\(4 classified lit\\), 192 rays, [0-9]+ nodes, [1-9][0-9]* pixels, [1-9][0-9]* samples hit, [1-9][0-9]* tiles in the hierarchy\n$")
+
+elseif(CHECK STREQUAL "soft_usage")
+  foreach(args
+      "--area-light;disk;${SOFT}" "--area-light;disk:0;${SOFT}" "--area-light;disk:-1;${SOFT}"
+      "--area-light;disk:1,2;${SOFT}" "--area-light;rect:2;${SOFT}" "--area-light;rect:2,x;${SOFT}"
+      "--area-light;rect:2,0;${SOFT}" "--area-light;sphere:1;${SOFT}" "--area-light;disk:inf;${SOFT}"
+      "--area-light;disk:1;--error-bound;${SOFT}" "--area-light;disk:1;-e;${SOFT}"
+      "--area-light;disk:1;--space;raster;${SOFT}" "--area-light;disk:1;--filter;box;${SOFT}"
+      "--area-light;disk:1;--filter-width;2;${SOFT}" "--area-light;disk:1;--level;0;${SOFT}"
+      "--area-light;disk:1;--bias=-0.1;${SOFT}" "--area-light;disk:1;--light-samples;0;${SOFT}"
+      "--area-light;disk:1;--layers;-1;${SOFT}" "--area-light;disk:1;--z-threshold;-1;${SOFT}"
+      "--area-light;disk:1;--seed=-1;${SOFT}" "--area-light;disk:1;--soft;vsm;${SOFT}"
+      "--area-light;disk:1;--soft;pcf;--light-samples;8;${SOFT}"
+      "--light-samples;8;${SOFT}" "--soft;pcf;${SOFT}" "--seed;3;${SOFT}" "--layers;1;${SOFT}"
+      "--z-threshold;0.1;${SOFT}")
+    run(${args} --point 2,0,0)
+    expect_rc(2)
+    expect_empty(OUT)
+    expect_contains(ERR "dsm-lookup: ")
+  endforeach()
+  run(--area-light rect:2,1 --error-bound "${SOFT}" --point 2,0,0)
+  expect_contains(ERR "dsm-lookup: --error-bound does not apply to --area-light")
+  run(--area-light disk:1 --space raster "${SOFT}" --point 2,0,0)
+  expect_contains(ERR "dsm-lookup: --area-light takes world or light points, not --space raster")
+  run(--area-light disk:1:2 "${SOFT}" --point 2,0,0)
+  expect_contains(ERR "dsm-lookup: --area-light 'disk:1:2': expected disk:R or rect:W,H")
+  # The defaults, named explicitly, are fine.
+  run(--area-light disk:1 --space world --soft mtsm --light-samples 64 --layers 0 --seed 1 "${SOFT}" -p 2,0,0)
+  expect_rc(0)
+
+elseif(CHECK STREQUAL "soft_map_errors")
+  # A light larger than the one the map was built for does not fit its frustum.
+  run("${SOFT}" --area-light disk:1.5 --point 2,0,0)
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${SOFT}")
+  expect_contains(ERR "does not fit the map's frustum")
+  run("${SOFT}" --area-light rect:2.5,1 --point 2,0,0)
+  expect_rc(1)
+  expect_one_error_line("${SOFT}")
+  # A smaller light fits.
+  run("${SOFT}" --area-light disk:0.5 --point 2,0,0)
+  expect_rc(0)
+  # An orthographic map has no light position to put an area light at.
+  run("${MONO}" --area-light disk:1 --point 2,0,0)
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${MONO}")
+  expect_contains(ERR "perspective")
+  # A map built without area_radius has no light plane to put an area light
+  # on (its projection centre is the point light): refused, naming the file.
+  set(plain "${WORK_DIR}/plain.dsm")
+  build_soft_map("${plain}" 0)
+  run("${plain}" --area-light disk:0.5 --point 2,0,0)
+  expect_rc(1)
+  expect_empty(OUT)
+  expect_one_error_line("${plain}")
+  expect_contains(ERR "area_radius")
+  # The map read from standard input is named '<stdin>' in the error.
+  run_with_input("${SOFT}" - --area-light disk:2 --point 2,0,0)
+  expect_rc(1)
+  expect_one_error_line("<stdin>")
 
 else()
   message(FATAL_ERROR "check_dsm_lookup.cmake: unknown check '${CHECK}'")

@@ -6,6 +6,12 @@
 //       point, the dsm::LookupContext answer as "%.9g" values separated by
 //       commas: V or R,G,B, then the error bound. SPACE is world, light or
 //       raster; FILTER box, triangle or gaussian; LEVEL -1 for automatic.
+//   lookup_reference --soft MAP SPACE SHAPE W H METHOD SAMPLES LAYERS ZTHRESHOLD BIAS SEED < points
+//       the same for dsm::SoftShadowContext with the light
+//       AreaLight::forMap(SHAPE disk: radius W; rect: W wide, H high):
+//       V or R,G,B, then for METHOD mtsm the rays and classifiedLit (0 or 1),
+//       for pcf the blocker depth and filter width. SPACE is world or light
+//       (converted with AreaLight::lightToWorld).
 //   lookup_reference --write-mono OUT
 //       writes an 8 x 8 monochrome map, tiles of 4, 2 levels, tolerance 0, an
 //       orthographic light with window [0, 8] x [0, 8] and
@@ -19,6 +25,7 @@
 #include <cstdio>
 #include <exception>
 #include <iostream>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -89,6 +96,38 @@ void printAnswers(const std::vector<std::string>& args) {
     if (!std::cin.eof()) throw std::runtime_error("unreadable point");
 }
 
+void printSoftAnswers(const std::vector<std::string>& args) {
+    const auto map = dsm::DeepShadowMap::open(args[0]);
+    const std::string& space = args[1];
+    if (space != "world" && space != "light") throw std::runtime_error("unknown space '" + space + "'");
+    const bool disk = args[2] == "disk";
+    if (!disk && args[2] != "rect") throw std::runtime_error("unknown shape '" + args[2] + "'");
+    const double width = std::stod(args[3]), height = std::stod(args[4]);
+    const dsm::AreaLight light =
+        disk ? dsm::AreaLight::forMap(map->info(), dsm::AreaLightShape::Disk, width, width)
+             : dsm::AreaLight::forMap(map->info(), dsm::AreaLightShape::Rectangle, width / 2.0, height / 2.0);
+    const bool pcf = args[5] == "pcf";
+    if (!pcf && args[5] != "mtsm") throw std::runtime_error("unknown method '" + args[5] + "'");
+    dsm::SoftShadowOptions options;
+    options.samples = std::stoi(args[6]);
+    options.layers = std::stoi(args[7]);
+    options.zThreshold = std::stod(args[8]);
+    options.bias = std::stod(args[9]);
+    options.seed = std::stoull(args[10]);
+    dsm::SoftShadowContext context(std::make_shared<dsm::SoftShadowTracer>(map, light));
+    dsm::Vec3 p{};
+    while (std::cin >> p[0] >> p[1] >> p[2]) {
+        const dsm::Vec3 receiver = space == "light" ? light.lightToWorld(p) : p;
+        const dsm::SoftShadowResult r =
+            pcf ? context.pcfVisibility(receiver, options) : context.visibility(receiver, options);
+        for (int c = 0; c < (map->info().channels == 3 ? 3 : 1); ++c)
+            std::printf("%.9g,", r.v[static_cast<std::size_t>(c)]);
+        if (pcf) std::printf("%.9g,%.9g\n", r.blockerDepth, r.filterWidth);
+        else std::printf("%d,%d\n", r.rays, r.classifiedLit ? 1 : 0);
+    }
+    if (!std::cin.eof()) throw std::runtime_error("unreadable point");
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -96,10 +135,14 @@ int main(int argc, char** argv) {
         const std::vector<std::string> args(argv + 1, argv + argc);
         if (args.size() == 2 && args[0] == "--write-mono") {
             writeMono(args[1]);
+        } else if (args.size() == 12 && args[0] == "--soft") {
+            printSoftAnswers(std::vector<std::string>(args.begin() + 1, args.end()));
         } else if (args.size() == 6) {
             printAnswers(args);
         } else {
-            std::cerr << "usage: lookup_reference MAP SPACE FILTER WIDTH LEVEL BIAS < points | --write-mono OUT\n";
+            std::cerr << "usage: lookup_reference MAP SPACE FILTER WIDTH LEVEL BIAS < points | --write-mono OUT\n"
+                         "       lookup_reference --soft MAP SPACE SHAPE W H METHOD SAMPLES LAYERS ZTHRESHOLD BIAS "
+                         "SEED < points\n";
             return 2;
         }
     } catch (const std::exception& e) {

@@ -2,6 +2,9 @@
 // line per query line, as a batch job or as a coprocess a renderer holds a
 // pipe to. Documentation, including the streaming protocol: docs/dsm-lookup.md.
 //
+// Two query modes: a filtered point lookup (dsm::LookupContext), and with
+// --area-light a soft shadow of an area light (dsm::SoftShadowContext).
+//
 // Uses only libdsm's public API; the line parsing and printing are the tool's.
 #include <array>
 #include <cerrno>
@@ -25,9 +28,11 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "dsm/area_light.h"
 #include "dsm/error.h"
 #include "dsm/lookup.h"
 #include "dsm/reader.h"
+#include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
 #include "tool_support.h"
 
@@ -46,6 +51,9 @@ constexpr double kMaxCacheMiB = 1024.0 * 1024.0;
 /// The widest map a reader accepts (ReaderOptions::maxWidth): a wider filter
 /// only costs time, and an unbounded one would make a lookup loop for ages.
 constexpr double kMaxFilterWidth = 131072.0;
+/// Light samples per soft query: a bound keeps one query's time finite
+/// (256 samples already put the estimate's noise below 1/32).
+constexpr int kMaxLightSamples = 65536;
 
 enum class Space { World, Light, Raster };
 enum class Format { Csv, Json };
@@ -65,6 +73,20 @@ struct Options {
     bool strict = false;
     bool stats = false;
     double cacheMiB = kDefaultCacheMiB;
+    // Soft shadows (--area-light); the rest apply only with it.
+    std::string areaLight;  ///< empty: point lookups
+    int lightSamples = 64;
+    int layers = 0;
+    double zThreshold = 0.0;
+    std::uint64_t seed = 1;
+    std::string soft = "mtsm";
+};
+
+/// --area-light disk:R or rect:W,H, as the library takes it.
+struct AreaLightSpec {
+    dsm::AreaLightShape shape = dsm::AreaLightShape::Disk;
+    double halfWidth = 0.0;
+    double halfHeight = 0.0;
 };
 
 /// Thrown for an argument CLI11 accepted but that does not make sense.
@@ -137,6 +159,36 @@ ParsedLine parseQueryLine(std::string_view line) {
     return result;
 }
 
+/// "disk:R" (radius) or "rect:W,H" (full width and height), sizes finite and > 0.
+AreaLightSpec parseAreaLight(const std::string& text) {
+    const auto positive = [](std::string_view field) {
+        const std::optional<double> value = parseNumber(field);
+        return value && *value > 0.0 ? value : std::nullopt;
+    };
+    const std::string_view t = text;
+    AreaLightSpec spec;
+    if (t.starts_with("disk:")) {
+        if (const auto radius = positive(t.substr(5))) {
+            spec.halfWidth = spec.halfHeight = *radius;
+            return spec;
+        }
+    } else if (t.starts_with("rect:")) {
+        const std::string_view sizes = t.substr(5);
+        if (const auto comma = sizes.find(','); comma != std::string_view::npos) {
+            const auto width = positive(sizes.substr(0, comma));
+            const auto height = positive(sizes.substr(comma + 1));
+            if (width && height) {
+                spec.shape = dsm::AreaLightShape::Rectangle;
+                spec.halfWidth = *width / 2.0;
+                spec.halfHeight = *height / 2.0;
+                return spec;
+            }
+        }
+    }
+    throw UsageError("--area-light " + quotedInput(text) +
+                     ": expected disk:R or rect:W,H with sizes > 0 (light-space units)");
+}
+
 /// "X,Y,Z" of --point.
 std::array<double, 3> parsePointArgument(const std::string& text) {
     const ParsedLine parsed = parseQueryLine(text);
@@ -177,12 +229,16 @@ private:
 };
 
 // ---------------------------------------------------------------------------
-// Query modes: how a point becomes an answer. Point lookups for now; an
-// area-light mode (soft shadows) will be a second implementation.
+// Query modes: how a point becomes an answer.
 
 struct Answer {
     std::array<double, 3> v{1.0, 1.0, 1.0};
     double errorBound = 0.0;
+    // Soft queries only (dsm::SoftShadowResult).
+    int rays = 0;
+    bool classifiedLit = false;
+    double blockerDepth = 0.0;
+    double filterWidth = 0.0;
 };
 
 class QueryMode {
@@ -215,6 +271,40 @@ private:
     dsm::LookupOptions options_;
 };
 
+enum class SoftMethod { Mtsm, Pcf };
+
+/// The fraction of an area light seen from the point: rays traced through the
+/// map (SoftShadowContext::visibility) or the PCF baseline (pcfVisibility).
+class SoftShadowQuery final : public QueryMode {
+public:
+    SoftShadowQuery(std::shared_ptr<const dsm::SoftShadowTracer> tracer, Space space, SoftMethod method,
+                    const dsm::SoftShadowOptions& options)
+        : light_(tracer->light()), context_(std::move(tracer)), space_(space), method_(method), options_(options) {}
+
+    Answer answer(const std::array<double, 3>& p) override {
+        // The library takes world points; light space is one affine map away.
+        const dsm::Vec3 receiver = space_ == Space::Light ? light_.lightToWorld(p) : p;
+        const dsm::SoftShadowResult r = method_ == SoftMethod::Mtsm ? context_.visibility(receiver, options_)
+                                                                    : context_.pcfVisibility(receiver, options_);
+        Answer a;
+        a.v = r.v;
+        a.rays = r.rays;
+        a.classifiedLit = r.classifiedLit;
+        a.blockerDepth = r.blockerDepth;
+        a.filterWidth = r.filterWidth;
+        return a;
+    }
+
+    const dsm::SoftShadowStats& stats() const { return context_.stats(); }
+
+private:
+    dsm::AreaLight light_;
+    dsm::SoftShadowContext context_;
+    Space space_;
+    SoftMethod method_;
+    dsm::SoftShadowOptions options_;
+};
+
 /// libdsm names the file in every message about the file; a message without
 /// it is about the query.
 bool isMapError(const std::string& message, const std::string& mapPath) {
@@ -232,11 +322,14 @@ std::string number(double v) {
     return buffer;
 }
 
+/// What JSON answers add after the values.
+enum class Details { None, Traced, Pcf };
+
 /// Prints one answer line per query, buffered; flush() hands them over.
 class AnswerWriter {
 public:
-    AnswerWriter(Format format, int channels, bool errorBound)
-        : format_(format), channels_(channels), errorBound_(errorBound) {}
+    AnswerWriter(Format format, int channels, bool errorBound, Details details = Details::None)
+        : format_(format), channels_(channels), errorBound_(errorBound), details_(details) {}
 
     void header() {
         if (format_ != Format::Csv) return;
@@ -258,6 +351,12 @@ public:
             else
                 text_ += ",\"v\":" + number(a.v[0]);
             if (errorBound_) text_ += ",\"error_bound\":" + number(a.errorBound);
+            if (details_ == Details::Traced)
+                text_ += ",\"rays\":" + std::to_string(a.rays) +
+                         ",\"classified_lit\":" + (a.classifiedLit ? "true" : "false");
+            if (details_ == Details::Pcf)
+                text_ += ",\"blocker_depth\":" + number(a.blockerDepth) +
+                         ",\"filter_width\":" + number(a.filterWidth);
             text_ += '}';
         }
         text_ += '\n';
@@ -291,6 +390,7 @@ private:
     Format format_;
     int channels_;
     bool errorBound_;
+    Details details_;
     std::string text_;
 };
 
@@ -426,12 +526,40 @@ void printStats(const Totals& totals, double seconds, const dsm::TileCacheStats&
               << " bytes in use\n";
 }
 
+void printSoftStats(const dsm::SoftShadowStats& s, std::size_t hierarchyTiles) {
+    std::cerr << kToolName << ": stats: soft " << s.queries << " queries (" << s.classifiedLit
+              << " classified lit), " << s.rays << " rays, " << s.nodesVisited << " nodes, " << s.pixelsVisited
+              << " pixels, " << s.samplesHit << " samples hit, " << hierarchyTiles << " tiles in the hierarchy\n";
+}
+
 /// libdsm's message about the map, naming it as the user did: a map read from
 /// standard input is opened as a temporary copy, shown as "<stdin>".
 std::string mapMessage(std::string message, const InputFile& mapFile) {
     if (mapFile.path() != mapFile.name() && isMapError(message, mapFile.path()))
         message = "'" + mapFile.name() + "'" + message.substr(mapFile.path().size() + 2);
     return message;
+}
+
+/// The options that belong to one query mode only.
+void checkSoftOptions(const CLI::App& app, const Options& o) {
+    const auto given = [&app](const char* name) { return app.count(name) > 0; };
+    if (o.areaLight.empty()) {
+        for (const char* name : {"--light-samples", "--layers", "--z-threshold", "--seed", "--soft"})
+            if (given(name)) throw UsageError(std::string(name) + " applies only with --area-light");
+        return;
+    }
+    parseAreaLight(o.areaLight);
+    for (const char* name : {"--filter", "--filter-width", "--level"})
+        if (given(name)) throw UsageError(std::string(name) + " does not apply to --area-light queries");
+    if (o.errorBound) throw UsageError("--error-bound does not apply to --area-light queries");
+    if (o.space == "raster")
+        throw UsageError("--area-light takes world or light points, not --space raster");
+    if (o.bias < 0.0) throw UsageError("--bias: must be >= 0 with --area-light");
+    // The PCF baseline traces no rays and reads every layer through its filter.
+    if (o.soft == "pcf")
+        for (const char* name : {"--light-samples", "--layers", "--seed"})
+            if (given(name)) throw UsageError(std::string(name) + " does not apply to --soft pcf");
+    if (!std::isfinite(o.zThreshold)) throw UsageError("--z-threshold: expected a finite number");
 }
 
 int run(const Options& o, const std::vector<std::array<double, 3>>& points, int level) {
@@ -468,14 +596,42 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         inputName = o.input;
     }
 
-    dsm::LookupOptions lookup;
-    lookup.filter = filterFromName(o.filter);
-    lookup.filterWidth = o.filterWidth;
-    lookup.level = level;
-    lookup.bias = o.bias;
-    PointLookup mode(map, spaceFromName(o.space), lookup);
-    AnswerWriter writer(o.format == "json" ? Format::Json : Format::Csv, map->info().channels, o.errorBound);
-    Session session(o, map->path(), mode, writer);
+    std::unique_ptr<QueryMode> mode;
+    SoftShadowQuery* soft = nullptr;
+    std::shared_ptr<const dsm::SoftShadowTracer> tracer;
+    Details details = Details::None;
+    if (o.areaLight.empty()) {
+        dsm::LookupOptions lookup;
+        lookup.filter = filterFromName(o.filter);
+        lookup.filterWidth = o.filterWidth;
+        lookup.level = level;
+        lookup.bias = o.bias;
+        mode = std::make_unique<PointLookup>(map, spaceFromName(o.space), lookup);
+    } else {
+        const AreaLightSpec spec = parseAreaLight(o.areaLight);
+        try {
+            const dsm::AreaLight light = dsm::AreaLight::forMap(map->info(), spec.shape, spec.halfWidth,
+                                                                spec.halfHeight);
+            tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+        } catch (const std::exception& e) {
+            reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+            return kExitFailure;
+        }
+        dsm::SoftShadowOptions shadow;
+        shadow.samples = o.lightSamples;
+        shadow.layers = o.layers;
+        shadow.zThreshold = o.zThreshold;
+        shadow.bias = o.bias;
+        shadow.seed = o.seed;
+        const SoftMethod method = o.soft == "pcf" ? SoftMethod::Pcf : SoftMethod::Mtsm;
+        details = method == SoftMethod::Pcf ? Details::Pcf : Details::Traced;
+        auto query = std::make_unique<SoftShadowQuery>(tracer, spaceFromName(o.space), method, shadow);
+        soft = query.get();
+        mode = std::move(query);
+    }
+    AnswerWriter writer(o.format == "json" ? Format::Json : Format::Csv, map->info().channels, o.errorBound,
+                        details);
+    Session session(o, map->path(), *mode, writer);
 
     const auto start = std::chrono::steady_clock::now();
     Stop stop = Stop::None;
@@ -495,7 +651,10 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         stop = Stop::InputError;
     }
     if (stop == Stop::OutputError) std::cerr << kToolName << ": ERROR: cannot write to standard output\n";
-    if (o.stats) printStats(session.totals, seconds, map->cache().stats());
+    if (o.stats) {
+        printStats(session.totals, seconds, map->cache().stats());
+        if (soft) printSoftStats(soft->stats(), tracer->hierarchyTilesBuilt());
+    }
     return stop == Stop::None && session.totals.bad == 0 ? kExitOk : kExitFailure;
 }
 
@@ -530,7 +689,9 @@ int main(int argc, char** argv) {
     app.add_option("-l,--level", o.level, "Mip level: auto (from the filter width, blending two levels) or L")
         ->type_name("auto|L")
         ->capture_default_str();
-    app.add_option("-b,--bias", o.bias, "Depth bias subtracted from each query depth (light units)")
+    app.add_option("-b,--bias", o.bias,
+                   "Depth bias subtracted from each query depth (light units); with --area-light the receiver "
+                   "bias, >= 0")
         ->capture_default_str();
     app.add_option("--format", o.format, "Answer format: CSV lines or JSON Lines")
         ->check(CLI::IsMember({"csv", "json"}))
@@ -542,6 +703,33 @@ int main(int argc, char** argv) {
     app.add_option("--cache-mb", o.cacheMiB, "Tile cache budget in MiB")
         ->check(CLI::NonNegativeNumber)
         ->type_name("MIB")
+        ->capture_default_str();
+    app.add_option("--area-light", o.areaLight,
+                   "Soft shadows of an area light centred on the map's light: a disk of radius R or a rectangle "
+                   "W wide and H high (light-space units); world or light points only")
+        ->type_name("disk:R|rect:W,H");
+    app.add_option("--light-samples", o.lightSamples, "Light samples (rays) per soft query")
+        ->check(CLI::Range(1, kMaxLightSamples))
+        ->type_name("N")
+        ->capture_default_str();
+    app.add_option("--layers", o.layers, "Map layers a soft query uses (0 = all)")
+        ->check(CLI::NonNegativeNumber)
+        ->type_name("K")
+        ->capture_default_str();
+    app.add_option("--z-threshold", o.zThreshold, "Depth tolerance of a ray hitting a stored sample (light units)")
+        ->check(CLI::NonNegativeNumber)
+        ->type_name("Z")
+        ->capture_default_str();
+    app.add_option("--seed", o.seed, "Seed of the light samples (a non-negative integer)")
+        ->check(CLI::Validator(
+            // CLI11 would wrap "-1" around to a huge unsigned number.
+            [](std::string& text) {
+                return text.find('-') == std::string::npos ? std::string() : "expects a non-negative integer";
+            },
+            "NONNEGATIVE", "non-negative"))
+        ->capture_default_str();
+    app.add_option("--soft", o.soft, "Soft-shadow method: mtsm (ray tracing the map) or pcf (the PCF baseline)")
+        ->check(CLI::IsMember({"mtsm", "pcf"}))
         ->capture_default_str();
     configureApp(app, kToolName, kDocumentation);
     app.footer("Exit status: 0 when every query was answered, 1 when a line was bad or the map could not be "
@@ -560,6 +748,7 @@ int main(int argc, char** argv) {
         if (o.header && o.format != "csv") throw UsageError("--header applies to --format csv only");
         level = levelFromText(o.level);
         for (const std::string& p : o.points) points.push_back(parsePointArgument(p));
+        checkSoftOptions(app, o);
     } catch (const UsageError& e) {
         std::cerr << kToolName << ": " << e.what() << "\nRun with --help for more information.\n";
         return kExitUsage;

@@ -56,9 +56,11 @@ public:
     /// map's build put its light: the plane depth follows from the area-light
     /// radius recorded in the map's metadata (settings.area_light_radius,
     /// written by buildMap; or the light's area_radius in the scene JSON the
-    /// map keeps). A map that records none gets the push-back derived from the
-    /// requested size, as disk() and rectangle() do. Throws dsm::Error when the
-    /// light does not fit the map (callers add the file's name).
+    /// map keeps). Throws dsm::Error when the map records no radius (its
+    /// projection centre is the point light itself, so no light plane lies in
+    /// its frustum: build it with the light's area_radius, or give disk() or
+    /// rectangle() a plane depth) or when the light does not fit the map
+    /// (callers add the file's name).
     static AreaLight forMap(const MapInfo& info, AreaLightShape shape, double halfWidth, double halfHeight);
     /// The area-light radius a map was built for (0 when it records none).
     static double recordedRadius(const MapInfo& info);
