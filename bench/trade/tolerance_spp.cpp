@@ -80,11 +80,13 @@ Json studyToleranceAndSpp(const Config& config, const Scene& scene, const std::s
                      {"seconds_per_lookup", secondsPerLookup(map, queries, bilinear)},
                      {"error_vs_reference", toJson(compare(values, truth))}};
             if (!uncompressed.empty()) row["error_vs_uncompressed"] = toJson(compare(values, uncompressed));
-            std::printf("  %s: N=%4u eps=%.4f  %8.2f s  %9llu bytes  %.2f vertices  max err %.4f (compression %.4f)\n",
-                        name.c_str(), n, tolerance, stats.wallSeconds,
-                        static_cast<unsigned long long>(info.fileBytes), meanVertices(info),
-                        row["error_vs_reference"]["max"].get<double>(),
-                        row.contains("error_vs_uncompressed") ? row["error_vs_uncompressed"]["max"].get<double>() : 0.0);
+            char compression[48] = "";
+            if (row.contains("error_vs_uncompressed"))
+                std::snprintf(compression, sizeof compression, " (compression %.4f)",
+                              row["error_vs_uncompressed"]["max"].get<double>());
+            std::printf("  %s: N=%4u eps=%.4f  %8.2f s  %9llu bytes  %.2f vertices  max err %.4f%s\n", name.c_str(), n,
+                        tolerance, stats.wallSeconds, static_cast<unsigned long long>(info.fileBytes),
+                        meanVertices(info), row["error_vs_reference"]["max"].get<double>(), compression);
             std::fflush(stdout);
             rows.push_back(std::move(row));
         }

@@ -25,7 +25,7 @@ struct Config {
     bool smoke = false;
     std::filesystem::path workDir;
     std::vector<std::string> scenes;   ///< scene files; the first drives the single-scene studies
-    std::uint32_t resolution = 64;     ///< map size of the tolerance x spp grid and the deep-vs-normal study
+    std::uint32_t resolution = 128;     ///< map size of the tolerance x spp grid and the deep-vs-normal study
     std::vector<std::uint32_t> spp{4, 16, 64, 256, 1024};
     std::vector<double> toleranceFactors{0.0, 0.25, 0.5, 1.0, 2.0, 4.0};  ///< times 0.25 / sqrt(N)
     std::uint32_t referenceSpp = 4096;

@@ -47,6 +47,7 @@
 
 #include "dsm/compressor.h"
 #include "dsm/error.h"
+#include "dsm/map_json.h"
 #include "dsm/reader.h"
 #include "dsm/writer.h"
 #include "text.h"
@@ -528,11 +529,6 @@ private:
     std::string temporary_;
     bool committed_ = false;
 };
-
-std::string projectionName(Projection p) { return p == Projection::Perspective ? "perspective" : "orthographic"; }
-std::string filterName(PixelFilter f) {
-    return f == PixelFilter::Box ? "box" : f == PixelFilter::Triangle ? "triangle" : "gaussian";
-}
 
 /// Per-pixel sample lists of a band of rows and the frame buffer that points
 /// OpenEXR at them. Rows [y0, y0 + rows) of columns [x0, x0 + width), in the

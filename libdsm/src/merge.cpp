@@ -19,6 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "dsm/error.h"
+#include "dsm/map_json.h"
 #include "dsm/reader.h"
 #include "dsm/visibility_product.h"
 #include "dsm/writer.h"
@@ -49,19 +50,11 @@ std::string number(double v) {
 template <std::size_t N>
 std::string numbers(const std::array<double, N>& values) {
     std::string out = "[";
-    for (std::size_t i = 0; i < N; ++i) out += (i ? "," : "") + number(values[i]);
-    return out + "]";
-}
-
-const char* projectionName(Projection p) { return p == Projection::Perspective ? "perspective" : "orthographic"; }
-
-const char* filterName(PixelFilter f) {
-    switch (f) {
-        case PixelFilter::Box: return "box";
-        case PixelFilter::Triangle: return "triangle";
-        case PixelFilter::Gaussian: return "gaussian";
+    for (std::size_t i = 0; i < N; ++i) {
+        if (i) out += ',';
+        out += number(values[i]);
     }
-    return "?";
+    return out + "]";
 }
 
 // Throws when `field` differs between the first input and another.

@@ -16,6 +16,7 @@
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
 #include "dsm/error.h"
+#include "dsm/map_json.h"
 #include "dsm/writer.h"
 #include "light_rays.h"
 #include "ray_caster.h"
@@ -45,15 +46,6 @@ double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
         }
     }
     return 0.0;
-}
-
-const char* filterName(PixelFilter f) {
-    switch (f) {
-        case PixelFilter::Box: return "box";
-        case PixelFilter::Triangle: return "triangle";
-        case PixelFilter::Gaussian: return "gaussian";
-    }
-    return "?";
 }
 
 // Everything one sample ray met.
