@@ -12,12 +12,17 @@ namespace {
 
 using Json = nlohmann::ordered_json;
 
-/// Metadata nested deeper than this is kept as text: printing JSON recurses
-/// once per level, and a file may hold 16 MiB of "[[[[...".
-constexpr std::size_t kMaxMetadataDepth = 100;
+Json metadataJson(const std::string& text) {
+    if (jsonNestingDepth(text) <= kMaxMetadataDepth) {
+        Json parsed = Json::parse(text, nullptr, /*allow_exceptions=*/false);
+        if (!parsed.is_discarded()) return parsed;
+    }
+    return Json(text);
+}
 
-/// Deepest nesting of arrays and objects in JSON text (strings skipped).
-std::size_t jsonDepth(std::string_view text) {
+}  // namespace
+
+std::size_t jsonNestingDepth(std::string_view text) {
     std::size_t depth = 0, deepest = 0;
     bool inString = false, escaped = false;
     for (const char c : text) {
@@ -35,16 +40,6 @@ std::size_t jsonDepth(std::string_view text) {
     }
     return deepest;
 }
-
-Json metadataJson(const std::string& text) {
-    if (jsonDepth(text) <= kMaxMetadataDepth) {
-        Json parsed = Json::parse(text, nullptr, /*allow_exceptions=*/false);
-        if (!parsed.is_discarded()) return parsed;
-    }
-    return Json(text);
-}
-
-}  // namespace
 
 const char* projectionName(Projection projection) {
     switch (projection) {

@@ -24,13 +24,14 @@
 
 #include "density.h"
 #include "dsm/error.h"
+#include "affine.h"
 #include "text.h"
 
 namespace dsm {
 
 namespace {
 
-using Affine = std::array<double, 12>;  // rows 0..2 of a row-major 4x4 matrix
+using namespace detail;  // affine.h
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 // Crossings of one object closer than this (relative to max(1, distance)) are
@@ -39,62 +40,8 @@ constexpr double kSameCrossing = 1e-6;
 // Beyond this many march steps along one ray the volume's step is unusable.
 constexpr double kMaxMarchSteps = 1e8;
 
-Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec3 scale(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 bool isZero(const Vec3& a) { return a[0] == 0.0 && a[1] == 0.0 && a[2] == 0.0; }
 bool isFinite(const Vec3& a) { return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]); }
-
-Affine affineOf(const std::array<double, 16>& m) {
-    Affine a{};
-    std::copy(m.begin(), m.begin() + 12, a.begin());
-    return a;
-}
-
-Vec3 transformPoint(const Affine& m, const Vec3& p) {
-    return {m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3], m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
-            m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]};
-}
-
-Vec3 transformVector(const Affine& m, const Vec3& v) {
-    return {m[0] * v[0] + m[1] * v[1] + m[2] * v[2], m[4] * v[0] + m[5] * v[1] + m[6] * v[2],
-            m[8] * v[0] + m[9] * v[1] + m[10] * v[2]};
-}
-
-// The transpose of m's linear part applied to v: carries object-space
-// normals of worldToObject's source to world space.
-Vec3 transposedVector(const Affine& m, const Vec3& v) {
-    return {m[0] * v[0] + m[4] * v[1] + m[8] * v[2], m[1] * v[0] + m[5] * v[1] + m[9] * v[2],
-            m[2] * v[0] + m[6] * v[1] + m[10] * v[2]};
-}
-
-double determinant3(const Affine& m) {
-    return m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
-           m[2] * (m[4] * m[9] - m[5] * m[8]);
-}
-
-Affine inverseAffine(const Affine& m, const std::string& what) {
-    const double det = determinant3(m);
-    if (!(std::abs(det) > 1e-300) || !std::isfinite(det))
-        throw Error(detail::concat(what, ": the transform is singular"));
-    const double id = 1.0 / det;
-    Affine r{};
-    r[0] = (m[5] * m[10] - m[6] * m[9]) * id;
-    r[1] = (m[2] * m[9] - m[1] * m[10]) * id;
-    r[2] = (m[1] * m[6] - m[2] * m[5]) * id;
-    r[4] = (m[6] * m[8] - m[4] * m[10]) * id;
-    r[5] = (m[0] * m[10] - m[2] * m[8]) * id;
-    r[6] = (m[2] * m[4] - m[0] * m[6]) * id;
-    r[8] = (m[4] * m[9] - m[5] * m[8]) * id;
-    r[9] = (m[1] * m[8] - m[0] * m[9]) * id;
-    r[10] = (m[0] * m[5] - m[1] * m[4]) * id;
-    const Vec3 t = transformVector(r, {m[3], m[7], m[11]});
-    r[3] = -t[0];
-    r[7] = -t[1];
-    r[11] = -t[2];
-    return r;
-}
 
 // ---- Embree errors -------------------------------------------------------
 

@@ -363,6 +363,19 @@ struct SoftShadowContext::Impl {
 
     // The receiver in light space and raster; false when it is lit by rule
     // (outside the map, or not beyond the light's plane plus the bias).
+    /// The start of every query: checks it, counts it and projects the
+    /// receiver (light space p, raster rx, ry). False when the receiver is
+    /// lit for lack of a place in the map (result is then the answer).
+    bool begin(const Vec3& world, const SoftShadowOptions& o, SoftShadowResult& result, Vec3& p, double& rx,
+               double& ry) {
+        check(world, o);
+        ++stats.queries;
+        result.channels = info().channels;
+        if (!receiver(world, o, p, rx, ry)) return false;
+        zThreshold = o.zThreshold;
+        return true;
+    }
+
     bool receiver(const Vec3& world, const SoftShadowOptions& o, Vec3& p, double& rx, double& ry) const {
         const MapInfo& m = info();
         p = m.camera.worldToLightSpace(world);
@@ -387,16 +400,11 @@ void SoftShadowContext::resetStats() { impl_->stats = {}; }
 
 SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const SoftShadowOptions& options) {
     Impl& s = *impl_;
-    s.check(receiverWorld, options);
-    ++s.stats.queries;
     const MapInfo& m = s.info();
     SoftShadowResult result;
-    result.channels = m.channels;
     Vec3 p;
     double prx, pry;
-    if (!s.receiver(receiverWorld, options, p, prx, pry)) return result;
-
-    s.zThreshold = options.zThreshold;
+    if (!s.begin(receiverWorld, options, result, p, prx, pry)) return result;
     s.stopBelow = options.visibilityThreshold;
     s.attenuation = options.attenuation;
     s.layers = static_cast<std::size_t>(options.layers == 0 ? m.maxLayers : std::min(options.layers, m.maxLayers));
@@ -446,15 +454,11 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
 
 SoftShadowResult SoftShadowContext::pcfVisibility(const Vec3& receiverWorld, const SoftShadowOptions& options) {
     Impl& s = *impl_;
-    s.check(receiverWorld, options);
-    ++s.stats.queries;
     const MapInfo& m = s.info();
     SoftShadowResult result;
-    result.channels = m.channels;
     Vec3 p;
     double prx, pry;
-    if (!s.receiver(receiverWorld, options, p, prx, pry)) return result;
-    s.zThreshold = options.zThreshold;
+    if (!s.begin(receiverWorld, options, result, p, prx, pry)) return result;
     double zBlocker;
     if (!s.classify(p, p[2] - options.bias, zBlocker)) {
         result.classifiedLit = true;

@@ -39,11 +39,6 @@ constexpr const char* kToolName = "dsm-info";
 
 using Json = nlohmann::ordered_json;
 
-/// Metadata nested deeper than this is shown as text: printing JSON recurses
-/// (and indents) once per level, and a file may hold 16 MiB of "[[[[...".
-/// (The same limit as the JSON description in libdsm's map_json.h.)
-constexpr std::size_t kMaxMetadataDepth = 100;
-
 struct PixelCoordinates {
     std::uint32_t x = 0;
     std::uint32_t y = 0;
@@ -176,30 +171,11 @@ std::string plural(std::uint64_t n, const std::string& one, const std::string& m
 // ---------------------------------------------------------------------------
 // Metadata
 
-/// Deepest nesting of arrays and objects in JSON text (strings skipped).
-std::size_t jsonDepth(std::string_view text) {
-    std::size_t depth = 0, deepest = 0;
-    bool inString = false, escaped = false;
-    for (const char c : text) {
-        if (inString) {
-            if (escaped) escaped = false;
-            else if (c == '\\') escaped = true;
-            else if (c == '"') inString = false;
-        } else if (c == '"') {
-            inString = true;
-        } else if (c == '[' || c == '{') {
-            deepest = std::max(deepest, ++depth);
-        } else if ((c == ']' || c == '}') && depth > 0) {
-            --depth;
-        }
-    }
-    return deepest;
-}
 
 /// The metadata as JSON, or nothing when it is not JSON (or nested too deep
 /// to print safely): it is then shown as text.
 std::optional<Json> parseMetadata(const std::string& text) {
-    if (jsonDepth(text) > kMaxMetadataDepth) return std::nullopt;
+    if (dsm::jsonNestingDepth(text) > dsm::kMaxMetadataDepth) return std::nullopt;
     Json parsed = Json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (parsed.is_discarded()) return std::nullopt;
     return parsed;
@@ -311,7 +287,8 @@ void printMetadata(std::ostream& out, const std::string& metadata) {
     }
     const std::optional<Json> parsed = parseMetadata(metadata);
     if (!parsed) {
-        field(out, "metadata", jsonDepth(metadata) > kMaxMetadataDepth ? "(nested too deep to format)" : "(not JSON)");
+        field(out, "metadata",
+              dsm::jsonNestingDepth(metadata) > dsm::kMaxMetadataDepth ? "(nested too deep to format)" : "(not JSON)");
         indented(out, metadata, "    ");
     } else if (!parsed->is_structured() || parsed->empty()) {
         field(out, "metadata", parsed->dump(-1, ' ', false, Json::error_handler_t::replace));

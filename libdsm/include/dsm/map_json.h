@@ -3,7 +3,9 @@
 // say exactly the same thing.
 #pragma once
 
+#include <cstddef>
 #include <string>
+#include <string_view>
 
 #include "dsm/map_info.h"
 
@@ -18,6 +20,14 @@ inline constexpr const char* kMapJsonSchemaVersion = "1.1";
 /// name recorded in the "file" field. Metadata that is JSON is embedded as
 /// JSON; other metadata (or JSON nested more than 100 levels deep) as a string.
 std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent = 2);
+
+/// Metadata nested deeper than this is kept as text: formatting JSON recurses
+/// once per level, and a file may hold 16 MiB of "[[[[...".
+inline constexpr std::size_t kMaxMetadataDepth = 100;
+
+/// Deepest nesting of arrays and objects in JSON text (strings skipped; the
+/// text need not be valid JSON).
+std::size_t jsonNestingDepth(std::string_view text);
 
 /// Names used in the description (and by the tools' text output).
 const char* projectionName(Projection projection);
