@@ -915,7 +915,7 @@ TEST(Density, VdbRoundTrip) {
 // The shipped examples stay valid.
 
 TEST(SceneExamples, AllParse) {
-    for (const char* name : {"hairball.json", "cloud-and-pipes.json", "leaves.json", "motion.json"}) {
+    for (const char* name : {"hairball.json", "cloud-and-pipes.json", "leaves.json", "motion.json", "area-light.json"}) {
         SCOPED_TRACE(name);
         const std::string path = std::string(DSM_SOURCE_DIR) + "/examples/" + name;
         dsm::Scene s;
