@@ -149,10 +149,16 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
     bool counts = true;
     std::size_t levels = 1;
     double tolerance = 0.0, inputBound = 0.0;
+    // Layers only when every input has them: a map of one layer knows nothing
+    // of what hides behind its opaque parts.
+    bool layered = true;
+    int layers = 1;
     Json inputs = Json::array();
     for (const Map& map : maps) {
         requireSameGeometry(*map, first);
         const MapInfo& m = map->info();
+        layered = layered && m.maxLayers > 1;
+        layers = std::max(layers, m.maxLayers);
         channels = std::max(channels, m.channels);
         counts = counts && m.hasCounts;
         levels = std::max(levels, m.levels.size());
@@ -169,6 +175,10 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
     product.tolerance = tolerance;
     product.maxInterpolationError = options.maxInterpolationError;
     product.keepCounts = counts;
+    product.maxLayers = layered ? layers : 1;
+    std::vector<int> budgets;
+    for (const Map& map : maps) budgets.push_back(map->info().maxLayers);
+    if (layered) product.factorLayers = budgets;
 
     std::vector<VisibilityView> factors(maps.size());
     std::vector<PixelFunction> held(maps.size());
@@ -194,6 +204,7 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
     report.width = info.width;
     report.height = info.height;
     report.channels = channels;
+    report.maxLayers = product.maxLayers;
     report.tolerance = tolerance;
     report.zlibLevel = options.zlibLevel < 0 ? kDefaultZlibLevel : options.zlibLevel;
     report.interpolationError = interpolation;
@@ -206,7 +217,7 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
     w.tileSize = info.tileSize;
     w.channels = channels;
     w.counts = counts;
-    w.maxLayers = 1;
+    w.maxLayers = product.maxLayers;
     w.camera = info.camera;
     w.filter = info.filter;
     w.filterWidth = info.filterWidth;
@@ -221,7 +232,8 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
                         {"interpolation_error", interpolation},
                         {"input_error_bound", report.inputErrorBound},
                         {"error_bound", report.errorBound},
-                        {"layers", "light-centre product only"}}}}
+                        {"layers", product.maxLayers > 1 ? "restarted from the inputs' layers"
+                                                          : "light-centre product only"}}}}
                      .dump();
     MapWriter writer(output, w);
     std::vector<VisibilityFunction> pixels;
@@ -425,6 +437,7 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
     report.width = info.width;
     report.height = info.height;
     report.channels = info.channels;
+    report.maxLayers = info.maxLayers;
     report.tolerance = info.levels.at(0).tolerance;
     report.zlibLevel = options.zlibLevel >= 0 ? options.zlibLevel : detectZlibLevel(maps);
     report.inputErrorBound = info.levels.at(0).errorBound;

@@ -190,6 +190,102 @@ private:
     double worst_ = 0.0;
 };
 
+// Depth of the last vertex of layer k, where that layer became opaque within
+// its map's tolerance (for a layer that another follows).
+float layerEndDepth(const VisibilityView& f, std::size_t k) { return f.z(f.layerEnd(k) - 1); }
+
+// The restart of a factor at depth d (spec/merge.md, "Layers"): the
+// visibility of what lies strictly beyond d as if the light started afresh
+// there, rebuilt from the factor's layers. Within the layer whose span holds d
+// it is that layer divided by its value at d (1 at a layer boundary, where
+// the restart is the next layer itself); where that layer ends, the next one
+// continues scaled by what was left at the end, and so on. A channel that
+// holds 0 at d stays 0. When the last layer lets no light reach d in any
+// channel, what lies beyond is nothing (V = 1) if the factor has layers to
+// spare (its build would have begun another), else unknown: returns false.
+bool restartAt(const VisibilityView& f, bool spareLayers, float d, int channels, DenseFunction& out) {
+    out = DenseFunction{};
+    out.channels = channels;
+    const int own = f.channels();
+    const std::size_t layers = f.layerCount();
+    std::size_t k = 0;
+    while (k + 1 < layers && !(d < layerEndDepth(f, k))) ++k;
+
+    Values scale{}, running{};
+    bool passes = false;
+    for (int c = 0; c < channels; ++c) {
+        const double base = f.evaluateLayer(k, d, std::min(c, own - 1));
+        scale[c] = base > 0.0 ? 1.0 / base : 0.0;
+        running[c] = base > 0.0 ? 1.0 : 0.0;
+        passes = passes || base > 0.0;
+    }
+    if (!passes) {
+        if (!spareLayers) return false;
+        out.z.push_back(d);
+        out.v.assign(static_cast<std::size_t>(channels), 1.0);
+        out.counts.push_back(0);
+        return true;
+    }
+    // The running minimum undoes rounding in the ratios, which are exact
+    // products of non-increasing values.
+    const auto emit = [&](float z, const Values& v, std::uint64_t count) {
+        for (int c = 0; c < channels; ++c) {
+            running[c] = std::min(running[c], std::clamp(v[c], 0.0, 1.0));
+            out.v.push_back(running[c]);
+        }
+        out.z.push_back(z);
+        out.counts.push_back(count);
+    };
+    // A vertex at d itself: d may fall inside a sloped segment.
+    emit(d, running, 0);
+    std::size_t i = f.layerBegin(k);
+    while (i < f.layerEnd(k) && !(f.z(i) > d)) ++i;  // steps at d belong to the earlier layer
+    // A layer is 1 up to its first vertex: a step there, not a slope from d.
+    if (i == f.layerBegin(k) && i < f.layerEnd(k)) emit(f.z(i), running, 0);
+    for (;;) {
+        for (; i < f.layerEnd(k); ++i) {
+            Values v{};
+            for (int c = 0; c < channels; ++c) v[c] = scale[c] * f.value(i, std::min(c, own - 1));
+            emit(f.z(i), v, f.count(i));
+        }
+        if (k + 1 >= layers) break;
+        bool left = false;
+        for (int c = 0; c < channels; ++c) {
+            scale[c] *= f.value(f.layerEnd(k) - 1, std::min(c, own - 1));
+            left = left || scale[c] > 0.0;
+        }
+        if (!left) break;  // opaque at the layer's end: 0 from there on
+        ++k;
+        i = f.layerBegin(k);
+        // The next layer is 1 up to its first vertex: a step there, not a slope.
+        emit(f.z(i), running, 0);
+    }
+    return true;
+}
+
+// The product of `parts` (at least one), folded pairwise; adds the chord
+// errors of the pairwise products to `interpolation`.
+DenseFunction foldProduct(std::vector<DenseFunction>& parts, double maxError, double& interpolation) {
+    DenseFunction product = std::move(parts.front());
+    for (std::size_t i = 1; i < parts.size(); ++i) {
+        PairProduct pair(product.channels, maxError);
+        product = pair.run(product, parts[i]);
+        interpolation += pair.worstError();
+    }
+    return product;
+}
+
+// The first vertex at or below the tolerance in every channel (where the
+// compressor ends a layer), or size() when there is none.
+std::size_t firstBlocked(const DenseFunction& f, double tolerance) {
+    for (std::size_t i = 0; i < f.size(); ++i) {
+        bool blocked = true;
+        for (int c = 0; c < f.channels && blocked; ++c) blocked = f.value(i, c) <= tolerance;
+        if (blocked) return i;
+    }
+    return f.size();
+}
+
 }  // namespace
 
 VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, const VisibilityProductOptions& options) {
@@ -197,6 +293,15 @@ VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, co
         throw Error(concat("visibility product: tolerance ", options.tolerance, " is not a finite value >= 0"));
     if (std::isnan(options.maxInterpolationError) || std::isinf(options.maxInterpolationError))
         throw Error(concat("visibility product: interpolation error ", options.maxInterpolationError, " is not finite"));
+    if (options.maxLayers < 1 || options.maxLayers > 255)
+        throw Error(concat("visibility product: layer count ", options.maxLayers, " is not in [1, 255]"));
+    if (!options.factorLayers.empty() && options.factorLayers.size() != factors.size())
+        throw Error(concat("visibility product: ", options.factorLayers.size(), " factor layer counts for ",
+                           factors.size(), " factors"));
+    for (std::size_t i = 0; i < options.factorLayers.size(); ++i)
+        if (options.factorLayers[i] < 1 || options.factorLayers[i] > 255)
+            throw Error(concat("visibility product: factor ", i, " layer count ", options.factorLayers[i],
+                               " is not in [1, 255]"));
     const double maxError = options.maxInterpolationError > 0.0
                                 ? options.maxInterpolationError
                                 : std::max(options.tolerance / 16.0, kMinInterpolationError);
@@ -214,33 +319,59 @@ VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, co
     for (const VisibilityView& f : factors) any = any || !f.empty();
     if (!any) return result;
 
-    DenseFunction product;
-    bool first = true;
-    for (const VisibilityView& f : factors) {
-        if (f.empty()) continue;  // V = 1: the product is unchanged
-        DenseFunction factor = lightCentre(f, channels);
-        if (first) {
-            product = std::move(factor);
-            first = false;
-            continue;
-        }
-        PairProduct pair(channels, maxError);
-        product = pair.run(product, factor);
-        result.interpolationError += pair.worstError();
+    std::vector<const VisibilityView*> present;
+    std::vector<std::size_t> budgets;
+    for (std::size_t i = 0; i < factors.size(); ++i) {
+        if (factors[i].empty()) continue;  // V = 1: the product is unchanged
+        present.push_back(&factors[i]);
+        budgets.push_back(static_cast<std::size_t>(options.factorLayers.empty() ? options.maxLayers
+                                                                                : options.factorLayers[i]));
     }
+    std::vector<DenseFunction> parts;
+    for (const VisibilityView* f : present) parts.push_back(lightCentre(*f, channels));
+    double interpolation = 0.0;
+    DenseFunction product = foldProduct(parts, maxError, interpolation);
+    result.interpolationError = interpolation;
 
     CompressorOptions compression;
     compression.tolerance = options.tolerance;
     compression.channels = channels;
     compression.keepCounts = options.keepCounts;
     compression.allowMonochrome = options.allowMonochrome;
+    // Layers are cut here rather than by the compressor, by the same rule:
+    // layer 0 (the light-centre product) has no vertices past its end for
+    // the compressor to refuse when an input's light-centre function ends
+    // there, yet the inputs' deeper layers may continue.
     Compressor compressor(compression);
-    for (std::size_t i = 0; i < product.size(); ++i) {
-        const std::uint64_t count = std::min<std::uint64_t>(product.counts[i], UINT32_MAX);
-        compressor.push(product.z[i], product.v.data() + i * static_cast<std::size_t>(channels),
-                        static_cast<std::uint32_t>(count));
+    for (int layer = 0;; ++layer) {
+        const std::size_t blocked =
+            layer + 1 < options.maxLayers ? firstBlocked(product, options.tolerance) : product.size();
+        // The layer takes every vertex up to and at the blocked depth.
+        std::size_t end = blocked;
+        while (end < product.size() && product.z[end] == product.z[blocked]) ++end;
+        for (std::size_t i = 0; i < end; ++i) {
+            const std::uint64_t count = std::min<std::uint64_t>(product.counts[i], UINT32_MAX);
+            compressor.push(product.z[i], product.v.data() + i * static_cast<std::size_t>(channels),
+                            static_cast<std::uint32_t>(count));
+        }
+        result.productVertices += end;
+        if (blocked == product.size()) break;
+        const float cutDepth = product.z[blocked];
+        // Layer `layer` ends at cutDepth: the next one is the product of the
+        // factors' restarts there.
+        parts.assign(present.size(), DenseFunction{});
+        bool known = true;
+        for (std::size_t i = 0; i < present.size() && known; ++i)
+            known = restartAt(*present[i], present[i]->layerCount() < budgets[i], cutDepth, channels, parts[i]);
+        if (!known) break;
+        interpolation = 0.0;
+        DenseFunction next = foldProduct(parts, maxError, interpolation);
+        const bool beyond = std::any_of(next.z.begin(), next.z.end(), [&](float z) { return z > cutDepth; });
+        if (!beyond) break;  // nothing lies behind: no further layer, as in a build
+        result.interpolationError = std::max(result.interpolationError, interpolation);
+        product = std::move(next);
+        compressor.beginLayer();
     }
-    result.productVertices = product.size();
     result.function = compressor.finish();
     return result;
 }

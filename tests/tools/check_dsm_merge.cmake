@@ -5,7 +5,7 @@
 #         -DEXAMPLES_DIR=<examples/> -DWORK_DIR=<fresh dir> -DVERSION=<project version>
 #         -P check_dsm_merge.cmake
 #
-# Checks: stitch2 stitch3 product overlap hole mismatch help version usage missing.
+# Checks: stitch2 stitch3 product product_layers overlap hole mismatch help version usage missing.
 # Builds use examples/leaves.json at 48 x 40 (tiles of 16) with 4 samples per pixel.
 cmake_minimum_required(VERSION 3.25)
 
@@ -111,6 +111,27 @@ elseif(CHECK STREQUAL "product")
   if(at_mode EQUAL -1 OR at_bound EQUAL -1)
     message(FATAL_ERROR "the merged map's metadata lacks merge.mode or merge.input_error_bound:\n${metadata}")
   endif()
+
+elseif(CHECK STREQUAL "product_layers")
+  # Layers are kept when every input has them (spec/merge.md, "Layers").
+  build(one -l 3)
+  build(two -l 3 --seed 7)
+  build(flat)
+  run("${WORK_DIR}/one.dsm" "${WORK_DIR}/two.dsm" -o "${OUTPUT_MAP}")
+  expect_rc(0)
+  expect_contains(OUT "3 channels, 3 layers,")
+  expect_valid_map("${OUTPUT_MAP}")
+  execute_process(COMMAND ${DSM_INFO} "${OUTPUT_MAP}" OUTPUT_VARIABLE info RESULT_VARIABLE rc)
+  expect_matches(info "MTSM layers +3")
+  expect_contains(info "restarted from the inputs' layers")
+  run("${WORK_DIR}/one.dsm" "${WORK_DIR}/flat.dsm" -o "${WORK_DIR}/single.dsm")
+  expect_rc(0)
+  if(OUT MATCHES "channels, [0-9]+ layers")
+    fail("a product with a one-layer input has one layer, yet the summary says:\n${OUT}")
+  endif()
+  execute_process(COMMAND ${DSM_INFO} "${WORK_DIR}/single.dsm" OUTPUT_VARIABLE info RESULT_VARIABLE rc)
+  expect_matches(info "MTSM layers +1")
+  expect_contains(info "light-centre product only")
 
 elseif(CHECK STREQUAL "overlap")
   build(left --region 0,0,30,40)

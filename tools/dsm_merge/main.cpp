@@ -69,7 +69,9 @@ int main(int argc, char** argv) {
             std::cout << kToolName << ": wrote '" << output << "' (" << mode << " of " << inputs.size() << " map"
                       << (inputs.size() == 1 ? "" : "s") << ")\n"
                       << "  size         " << r.width << "x" << r.height << ", " << r.channels
-                      << (r.channels == 1 ? " channel" : " channels") << ", " << r.vertices << " level-0 vertices, "
+                      << (r.channels == 1 ? " channel" : " channels")
+                      << (r.maxLayers > 1 ? ", " + std::to_string(r.maxLayers) + " layers" : "") << ", " << r.vertices
+                      << " level-0 vertices, "
                       << r.fileBytes << " bytes\n"
                       << "  tolerance    " << r.tolerance << " (zlib level " << r.zlibLevel << ")\n";
             if (options.mode == dsm::MergeMode::Product)

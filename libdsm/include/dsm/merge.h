@@ -15,8 +15,11 @@ enum class MergeMode : std::uint8_t {
     /// rebuilds the mip levels. Inputs: the same light camera, size, tile
     /// size, pixel filter and width. A monochrome map times an RGB map is RGB
     /// (the monochrome value multiplies every channel). The output has counts
-    /// when every input has them, and one layer (layers cannot be multiplied
-    /// in this format: only the light-centre product is kept).
+    /// when every input has them. When every input has layers (MTSM,
+    /// maxLayers > 1) the output has as many as the input with the most: each
+    /// layer after the first is the product of the inputs' restarts where the
+    /// previous one became opaque (VisibilityProductOptions::maxLayers);
+    /// otherwise it has one layer, the light-centre product.
     Product,
     /// Maps built with BuildOptions::region over disjoint parts that cover
     /// the whole image become the map a single full build would have written,
@@ -45,6 +48,8 @@ struct MergeReport {
     std::uint32_t width = 0;
     std::uint32_t height = 0;
     int channels = 1;
+    /// Most layers per pixel of the output (the header's maxLayers).
+    int maxLayers = 1;
     std::uint64_t vertices = 0;  ///< level-0 vertices written
     /// Level-0 tolerance of the output.
     double tolerance = 0.0;
