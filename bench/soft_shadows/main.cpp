@@ -151,9 +151,12 @@ Frame render(Method method, const Receivers& r, const std::shared_ptr<const dsm:
             } else if (method == Method::Pcf) {
                 v = context.pcfVisibility(p, o).v[0];
             } else {
+                // The map holds visibility averaged over the shutter: so does
+                // the reference, one stratified shutter time per light sample.
                 samples = light.samples(p, o.samples, o.seed);
                 double sum = 0.0;
-                for (const Vec3& s : samples) sum += reference.transmittance(p, s)[0];
+                for (std::size_t k = 0; k < samples.size(); ++k)
+                    sum += reference.transmittance(p, samples[k], (k + 0.5) / samples.size())[0];
                 v = sum / samples.size();
             }
             f.v[i] = static_cast<float>(v);
@@ -350,7 +353,8 @@ std::vector<std::string> splitList(const std::string& text) {
 int main(int argc, char** argv) {
     Config config;
     std::string outPath, scenes = std::string(DSM_SOFT_EXAMPLES_DIR) + "/hairball.json," + DSM_SOFT_EXAMPLES_DIR +
-                                  "/cloud-and-pipes.json," + DSM_SOFT_EXAMPLES_DIR + "/leaves.json";
+                                  "/cloud-and-pipes.json," + DSM_SOFT_EXAMPLES_DIR + "/leaves.json," +
+                                  DSM_SOFT_EXAMPLES_DIR + "/motion.json";
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         const bool hasValue = i + 1 < argc;

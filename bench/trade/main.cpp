@@ -94,6 +94,8 @@ int main(int argc, char** argv) {
         config.referenceSpp = 64;
         config.referenceTolerance = 0.001;
         config.queries = 500;
+        config.tracedQueries = 50;
+        config.tracedRaysPerSide = 8;
         config.cacheResolution = 32;
         config.cacheTileSize = 8;
     }

@@ -32,6 +32,8 @@ struct Config {
     double referenceTolerance = 0.0005;   ///< a quarter of the smallest tolerance tested at N = 1024
     std::uint32_t maxUncompressedSpp = 64;  ///< largest N with an uncompressed (epsilon = 0) map
     std::size_t queries = 20000;       ///< lookups per error and time measurement
+    std::size_t tracedQueries = 500;   ///< pixel-centre queries checked against ray-traced truth
+    int tracedRaysPerSide = 32;        ///< their truth: side x side rays per pixel
     std::uint32_t cacheResolution = 256;
     std::uint32_t cacheTileSize = 16;
     unsigned threads = 0;
