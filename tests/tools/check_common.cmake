@@ -63,3 +63,24 @@ function(json_expect_type json expected)
     fail("JSON ${ARGN}: expected type ${expected}, got ${value}")
   endif()
 endfunction()
+
+# expect_error_line(prefix): exactly one line on stderr, starting with prefix
+# (the tools' convention: "<tool>: ERROR '<file>': <message>").
+function(expect_error_line prefix)
+  string(REGEX MATCHALL "\n" newlines "${ERR}")
+  list(LENGTH newlines lines)
+  if(NOT lines EQUAL 1)
+    fail("expected exactly one line on stderr")
+  endif()
+  string(FIND "${ERR}" "${prefix}" at)
+  if(NOT at EQUAL 0)
+    fail("expected stderr to start with \"${prefix}\"")
+  endif()
+endfunction()
+
+# expect_no_file(path): a failed run left no file behind.
+function(expect_no_file path)
+  if(EXISTS "${path}")
+    fail("expected no file '${path}' after a failed run")
+  endif()
+endfunction()

@@ -23,21 +23,7 @@ endfunction()
 
 # Exactly one line on stderr, starting with the given prefix.
 function(expect_one_error_line prefix)
-  string(REGEX MATCHALL "\n" newlines "${ERR}")
-  list(LENGTH newlines lines)
-  if(NOT lines EQUAL 1)
-    fail("expected exactly one line on stderr")
-  endif()
-  string(FIND "${ERR}" "${prefix}" at)
-  if(NOT at EQUAL 0)
-    fail("expected stderr to start with \"${prefix}\"")
-  endif()
-endfunction()
-
-function(expect_no_file path)
-  if(EXISTS "${path}")
-    fail("expected no file '${path}' after a failed build")
-  endif()
+  expect_error_line("${prefix}")
 endfunction()
 
 # dsm-info --verify accepts the file.

@@ -32,15 +32,7 @@ endfunction()
 
 # The one-line error convention: "dsm-convert: ERROR '<file>': ...".
 function(expect_one_error_line file)
-  string(REGEX MATCHALL "\n" newlines "${ERR}")
-  list(LENGTH newlines lines)
-  if(NOT lines EQUAL 1)
-    fail("expected exactly one line on stderr")
-  endif()
-  string(FIND "${ERR}" "dsm-convert: ERROR '${file}': " at)
-  if(NOT at EQUAL 0)
-    fail("expected stderr to start with \"dsm-convert: ERROR '${file}': \"")
-  endif()
+  expect_error_line("dsm-convert: ERROR '${file}': ")
 endfunction()
 
 file(REMOVE_RECURSE "${WORK_DIR}")

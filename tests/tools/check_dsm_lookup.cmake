@@ -101,11 +101,7 @@ endfunction()
 
 # One error line on stderr in the tools' format: "dsm-lookup: ERROR '<file>': ...".
 function(expect_one_error_line file)
-  expect_lines(ERR 1)
-  string(FIND "${ERR}" "dsm-lookup: ERROR '${file}': " at)
-  if(NOT at EQUAL 0)
-    fail("expected stderr to start with \"dsm-lookup: ERROR '${file}': \"")
-  endif()
+  expect_error_line("dsm-lookup: ERROR '${file}': ")
 endfunction()
 
 # soft_reference(map space shape w h method samples layers z bias seed text):
