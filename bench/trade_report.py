@@ -268,6 +268,17 @@ class Report:
             self.add("Columns: reference, MTSM, PCF, then the differences MTSM − reference and PCF − reference "
                      "(×4; red: too bright, blue: too dark); rows: small, medium, large light; "
                      f"N = {sc['rows'][-1]['samples']}.", "")
+            if "scaling" in sc:
+                body = [[f"{r['resolution']}²", f"{r['walk']['pixels_per_ray']:.1f}",
+                         f"{r['walk']['microseconds_per_ray']:.2f}", f"{r['hierarchy']['pixels_per_ray']:.1f}",
+                         f"{r['hierarchy']['nodes_per_ray']:.1f}", f"{r['hierarchy']['microseconds_per_ray']:.2f}",
+                         f"{r['walk']['microseconds_per_ray'] / r['hierarchy']['microseconds_per_ray']:.1f}"]
+                        for r in sc["scaling"]]
+                self.add("Cost per ray against the map's resolution (Xie §4.3; medium light, 64 rays per receiver, "
+                         f"{sc['scaling'][0]['receivers']} receivers, classification off, one thread): walking every "
+                         "pixel a ray crosses against the min/max depth hierarchy.", "")
+                self.add(table(["map", "walk pixels/ray", "walk µs/ray", "hierarchy pixels/ray", "hierarchy nodes/ray",
+                                "hierarchy µs/ray", "walk / hierarchy time"], body), "")
             if "knobs" in sc:
                 body = [[k["knob"], f"{k['value']:.4g}", k["samples"], k["layers"] or "all", f"{k['bias']:.3g}",
                          f"{k['error']['mean']:.4f} ± {k['error']['stddev']:.4f}", f"{k['mtsm_seconds']:.2f}",

@@ -221,7 +221,60 @@ std::string stem(const std::string& path) {
     return name.substr(0, name.find('.'));
 }
 
-Json runScene(const Config& config, const std::string& file, bool sweepKnobs) {
+/// Cost of a ray through the map against the map's resolution (Xie §4.3):
+/// the same receivers and light at 128² .. 1024², every ray walked pixel by
+/// pixel or through the min/max depth hierarchy (classification off, so
+/// every ray is traced), one thread. Counts come from SoftShadowStats.
+Json hierarchyScaling(const Config& config, const dsm::Scene& sceneIn, const Receivers& receivers, double radius,
+                      const dsm::SoftShadowOptions& base, const std::string& name) {
+    dsm::Scene scene = sceneIn;  // areaLightRadius already set for the largest light
+    const std::vector<std::uint32_t> sizes =
+        config.smoke ? std::vector<std::uint32_t>{16, 32} : std::vector<std::uint32_t>{128, 256, 512, 1024};
+    std::vector<Vec3> points;
+    for (std::size_t i = 0; i < receivers.points.size(); i += 7)
+        if (receivers.valid[i]) points.push_back(receivers.points[i]);
+    Json rows = Json::array();
+    for (const std::uint32_t size : sizes) {
+        dsm::BuildOptions build;
+        build.width = build.height = size;
+        build.samplesPerPixel = 4;
+        build.mtsmLayers = config.mapLayers;
+        build.threads = config.threads;
+        const auto path = config.workDir / (name + "-scaling.dsm");
+        dsm::buildMap(scene, build, path.string());
+        const auto map = dsm::DeepShadowMap::open(path.string());
+        const double plane = dsm::AreaLight::disk(map->info().camera, scene.light.areaLightRadius).planeDepth();
+        const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radius, plane);
+        const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+        Json row{{"resolution", size}, {"receivers", points.size()}};
+        for (const bool hierarchy : {false, true}) {
+            dsm::SoftShadowContext context(tracer);
+            dsm::SoftShadowOptions o = base;
+            o.samples = 64;
+            o.hierarchy = hierarchy;
+            o.classification = false;
+            const auto start = std::chrono::steady_clock::now();
+            for (const Vec3& p : points) context.visibility(p, o);
+            const double wall = seconds(start);
+            const dsm::SoftShadowStats& st = context.stats();
+            const double rays = std::max<double>(1.0, double(st.rays));
+            row[hierarchy ? "hierarchy" : "walk"] = {{"rays", st.rays},
+                                                     {"pixels_per_ray", st.pixelsVisited / rays},
+                                                     {"nodes_per_ray", st.nodesVisited / rays},
+                                                     {"microseconds_per_ray", 1e6 * wall / rays}};
+        }
+        std::printf("  %s scaling %4u^2: walk %.1f px/ray %.2f us/ray | hierarchy %.1f px + %.1f nodes/ray %.2f us/ray\n",
+                    name.c_str(), size, row["walk"]["pixels_per_ray"].get<double>(),
+                    row["walk"]["microseconds_per_ray"].get<double>(), row["hierarchy"]["pixels_per_ray"].get<double>(),
+                    row["hierarchy"]["nodes_per_ray"].get<double>(),
+                    row["hierarchy"]["microseconds_per_ray"].get<double>());
+        std::fflush(stdout);
+        rows.push_back(std::move(row));
+    }
+    return rows;
+}
+
+Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bool scaling) {
     const std::string name = stem(file);
     dsm::Scene scene = dsm::loadScene(file);
     const dsm::ReferenceTracer reference(scene);
@@ -337,6 +390,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs) {
         }
         out["knobs"] = std::move(knobs);
     }
+    if (scaling) out["scaling"] = hierarchyScaling(config, scene, receivers, radii[1], base, name);
     return out;
 }
 
@@ -393,7 +447,7 @@ int main(int argc, char** argv) {
         report["scenes"] = Json::array();
         for (std::size_t s = 0; s < config.scenes.size(); ++s) {
             std::printf("soft shadows: %s\n", config.scenes[s].c_str());
-            report["scenes"].push_back(runScene(config, config.scenes[s], s < 2));
+            report["scenes"].push_back(runScene(config, config.scenes[s], s < 2, s == 0));
         }
         std::ofstream out(outPath);
         out << report.dump(2) << "\n";
