@@ -211,6 +211,20 @@ TEST(AreaLight, DerivedPlaneIsTheScenesPushBack) {
     EXPECT_THROW(dsm::AreaLight::rectangle(camera, 0.0, 1.0), dsm::Error);
 }
 
+TEST(AreaLight, SizesParseFromTheToolsSyntax) {
+    const auto disk = dsm::AreaLightSize::parse("disk:0.5");
+    EXPECT_EQ(disk.shape, dsm::AreaLightShape::Disk);
+    EXPECT_EQ(disk.halfWidth, 0.5);
+    EXPECT_EQ(disk.halfHeight, 0.5);
+    const auto rect = dsm::AreaLightSize::parse("rect:2,1");
+    EXPECT_EQ(rect.shape, dsm::AreaLightShape::Rectangle);
+    EXPECT_EQ(rect.halfWidth, 1.0);
+    EXPECT_EQ(rect.halfHeight, 0.5);
+    for (const char* bad : {"disk:", "disk:0", "disk:-1", "disk:x", "disk:1,2", "rect:1", "rect:1,0", "rect:1,2,3",
+                            "sphere:1", "disk:inf", ""})
+        EXPECT_THROW(dsm::AreaLightSize::parse(bad), dsm::Error) << bad;
+}
+
 TEST(AreaLight, ForMapPlacesTheLightWhereTheBuildPutIt) {
     TempDir dir;
     const BuiltMap m = build(dir, "for-map", {});

@@ -3,6 +3,9 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
+#include <charconv>
+#include <optional>
+#include <system_error>
 #include <bit>
 #include <cmath>
 #include <numbers>
@@ -111,6 +114,36 @@ AreaLight AreaLight::disk(const LightCamera& camera, double radius, double plane
 
 AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, double halfHeight, double planeDepth) {
     return make(camera, AreaLightShape::Rectangle, halfWidth, halfHeight, planeDepth);
+}
+
+AreaLightSize AreaLightSize::parse(std::string_view text) {
+    const auto positive = [](std::string_view field) -> std::optional<double> {
+        if (!field.empty() && field.front() == '+') field.remove_prefix(1);
+        double value = 0.0;
+        const auto [end, error] = std::from_chars(field.data(), field.data() + field.size(), value);
+        if (error != std::errc() || end != field.data() + field.size() || !std::isfinite(value) || !(value > 0.0))
+            return std::nullopt;
+        return value;
+    };
+    AreaLightSize size;
+    if (text.starts_with("disk:")) {
+        if (const auto radius = positive(text.substr(5))) {
+            size.halfWidth = size.halfHeight = *radius;
+            return size;
+        }
+    } else if (text.starts_with("rect:")) {
+        const std::string_view sizes = text.substr(5);
+        if (const auto comma = sizes.find(','); comma != std::string_view::npos) {
+            const auto width = positive(sizes.substr(0, comma)), height = positive(sizes.substr(comma + 1));
+            if (width && height) {
+                size.shape = AreaLightShape::Rectangle;
+                size.halfWidth = *width / 2.0;
+                size.halfHeight = *height / 2.0;
+                return size;
+            }
+        }
+    }
+    throw Error(concat("area light '", text, "': expected disk:R or rect:W,H with sizes > 0 (light-space units)"));
 }
 
 double AreaLight::recordedRadius(const MapInfo& info) {

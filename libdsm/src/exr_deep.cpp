@@ -918,9 +918,7 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
         w.mipLevels = options.mipLevels;
         w.zlibLevel = options.zlibLevel;
         if (const auto* f = findAttribute<Imf::StringAttribute>(h, "dsm:filter")) {
-            if (f->value() == "box") w.filter = PixelFilter::Box;
-            else if (f->value() == "triangle") w.filter = PixelFilter::Triangle;
-            else if (f->value() == "gaussian") w.filter = PixelFilter::Gaussian;
+            if (const auto filter = pixelFilterFromName(f->value())) w.filter = *filter;
         }
         if (const auto* fw = findAttribute<Imf::DoubleAttribute>(h, "dsm:filterWidth"))
             if (fw->value() > 0.0 && std::isfinite(fw->value())) w.filterWidth = fw->value();

@@ -58,6 +58,12 @@ const char* filterName(PixelFilter filter) {
     return "unknown";
 }
 
+std::optional<PixelFilter> pixelFilterFromName(std::string_view name) {
+    for (const PixelFilter f : {PixelFilter::Box, PixelFilter::Triangle, PixelFilter::Gaussian})
+        if (name == filterName(f)) return f;
+    return std::nullopt;
+}
+
 std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent) {
     Json j;
     j["schema_version"] = kMapJsonSchemaVersion;

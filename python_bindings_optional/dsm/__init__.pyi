@@ -1,4 +1,4 @@
-# Type stubs for the dsm package (libdsm's Python bindings).
+# Typing information for the dsm package (libdsm's Python bindings), for help() and editors.
 import os
 from typing import Any, Literal, Mapping, Union, overload
 

@@ -43,9 +43,7 @@ Space parseSpace(const std::string& name) {
 }
 
 dsm::PixelFilter parseFilter(const std::string& name) {
-    if (name == "box") return dsm::PixelFilter::Box;
-    if (name == "triangle") return dsm::PixelFilter::Triangle;
-    if (name == "gaussian") return dsm::PixelFilter::Gaussian;
+    if (const auto filter = dsm::pixelFilterFromName(name)) return *filter;
     throw py::value_error("filter must be 'box', 'triangle' or 'gaussian', not '" + name + "'");
 }
 
@@ -58,6 +56,22 @@ int parseLevel(const py::object& level) {
     const long value = level.cast<long>();
     if (value < 0) throw py::value_error("level must be 'auto' or an integer >= 0");
     return static_cast<int>(std::min<long>(value, 1 << 20));
+}
+
+using PointArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
+
+/// The rows of an (N, 3) array, copied out while the GIL is held.
+std::vector<double> pointRows(const PointArray& points) {
+    if (points.ndim() != 2 || points.shape(1) != 3) throw py::value_error("points must be an array of shape (N, 3)");
+    return std::vector<double>(points.data(), points.data() + 3 * points.shape(0));
+}
+
+/// Per-point values as (N,) for one channel, (N, 3) for three.
+py::array_t<double> valuesArray(const std::vector<double>& values, int channels) {
+    const auto n = static_cast<py::ssize_t>(values.size() / static_cast<std::size_t>(channels));
+    py::array_t<double> out = channels == 1 ? py::array_t<double>({n}) : py::array_t<double>({n, py::ssize_t{3}});
+    std::copy(values.begin(), values.end(), out.mutable_data());
+    return out;
 }
 
 unsigned workerCount(int threads, std::size_t work) {
@@ -171,20 +185,17 @@ public:
 
     /// Filtered lookups of an (N, 3) array. Returns (values, bounds): values
     /// shape (N,) for a monochrome map, (N, 3) for RGB; bounds shape (N,).
-    py::tuple lookup(const py::array_t<double, py::array::c_style | py::array::forcecast>& points,
-                     const std::string& space, const std::string& filter, double filterWidth, const py::object& level,
-                     double bias, int threads) const {
-        if (points.ndim() != 2 || points.shape(1) != 3)
-            throw py::value_error("points must be an array of shape (N, 3)");
+    py::tuple lookup(const PointArray& points, const std::string& space, const std::string& filter, double filterWidth,
+                     const py::object& level, double bias, int threads) const {
+        const std::vector<double> input = pointRows(points);
         dsm::LookupOptions options;
         options.filter = parseFilter(filter);
         options.filterWidth = filterWidth;
         options.level = parseLevel(level);
         options.bias = bias;
         const Space where = parseSpace(space);
-        const std::size_t n = static_cast<std::size_t>(points.shape(0));
+        const std::size_t n = input.size() / 3;
         const int channels = info().channels;
-        std::vector<double> input(points.data(), points.data() + 3 * n);
         std::vector<double> values(n * static_cast<std::size_t>(channels)), bounds(n);
         {
             py::gil_scoped_release released;
@@ -201,22 +212,16 @@ public:
                 }
             });
         }
-        py::array_t<double> valueArray = channels == 1 ? py::array_t<double>({static_cast<py::ssize_t>(n)})
-                                                       : py::array_t<double>({static_cast<py::ssize_t>(n), py::ssize_t{3}});
-        std::copy(values.begin(), values.end(), valueArray.mutable_data());
-        py::array_t<double> boundArray({static_cast<py::ssize_t>(n)});
-        std::copy(bounds.begin(), bounds.end(), boundArray.mutable_data());
-        return py::make_tuple(valueArray, boundArray);
+        return py::make_tuple(valuesArray(values, channels), valuesArray(bounds, 1));
     }
 
     /// Soft shadows of an area light at world points (N, 3): MTSM ray tracing
     /// of the map, or the PCF baseline. `light` is "disk:R" or "rect:W,H"
     /// (full sizes). Returns values shaped like lookup()'s.
-    py::array_t<double> softShadow(const py::array_t<double, py::array::c_style | py::array::forcecast>& points,
-                                   const std::string& light, int samples, int layers, double bias, double zThreshold,
-                                   std::uint64_t seed, const std::string& method, int threads) const {
-        if (points.ndim() != 2 || points.shape(1) != 3)
-            throw py::value_error("points must be an array of shape (N, 3)");
+    py::array_t<double> softShadow(const PointArray& points, const std::string& light, int samples, int layers,
+                                   double bias, double zThreshold, std::uint64_t seed, const std::string& method,
+                                   int threads) const {
+        const std::vector<double> input = pointRows(points);
         if (method != "mtsm" && method != "pcf") throw py::value_error("method must be 'mtsm' or 'pcf'");
         const dsm::AreaLight area = parseLight(light);
         dsm::SoftShadowOptions options;
@@ -226,9 +231,8 @@ public:
         options.zThreshold = zThreshold;
         options.seed = seed;
         const bool pcf = method == "pcf";
-        const std::size_t n = static_cast<std::size_t>(points.shape(0));
+        const std::size_t n = input.size() / 3;
         const int channels = info().channels;
-        std::vector<double> input(points.data(), points.data() + 3 * n);
         std::vector<double> values(n * static_cast<std::size_t>(channels));
         {
             py::gil_scoped_release released;
@@ -243,10 +247,7 @@ public:
                 }
             });
         }
-        py::array_t<double> out = channels == 1 ? py::array_t<double>({static_cast<py::ssize_t>(n)})
-                                                : py::array_t<double>({static_cast<py::ssize_t>(n), py::ssize_t{3}});
-        std::copy(values.begin(), values.end(), out.mutable_data());
-        return out;
+        return valuesArray(values, channels);
     }
 
     py::dict cacheStats() const {
@@ -268,29 +269,13 @@ public:
 private:
     /// "disk:R" or "rect:W,H", placed where the map's build put its light.
     dsm::AreaLight parseLight(const std::string& text) const {
-        const auto colon = text.find(':');
-        const std::string shape = text.substr(0, colon);
-        std::vector<double> sizes;
-        if (colon != std::string::npos) {
-            std::size_t at = colon + 1;
-            while (at <= text.size()) {
-                const std::size_t comma = std::min(text.find(',', at), text.size());
-                try {
-                    std::size_t used = 0;
-                    const std::string field = text.substr(at, comma - at);
-                    sizes.push_back(std::stod(field, &used));
-                    if (used != field.size()) throw std::invalid_argument(field);
-                } catch (const std::exception&) {
-                    throw py::value_error("light must be 'disk:R' or 'rect:W,H', not '" + text + "'");
-                }
-                at = comma + 1;
-            }
+        dsm::AreaLightSize size;
+        try {
+            size = dsm::AreaLightSize::parse(text);
+        } catch (const dsm::Error& e) {
+            throw py::value_error(e.what());
         }
-        if (shape == "disk" && sizes.size() == 1)
-            return dsm::AreaLight::forMap(info(), dsm::AreaLightShape::Disk, sizes[0], sizes[0]);
-        if (shape == "rect" && sizes.size() == 2)
-            return dsm::AreaLight::forMap(info(), dsm::AreaLightShape::Rectangle, 0.5 * sizes[0], 0.5 * sizes[1]);
-        throw py::value_error("light must be 'disk:R' or 'rect:W,H', not '" + text + "'");
+        return dsm::AreaLight::forMap(info(), size);
     }
 
 private:

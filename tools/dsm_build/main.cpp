@@ -151,8 +151,7 @@ int main(int argc, char** argv) {
         }
         if (tolerance != "auto" && !(options.tolerance >= 0.0))
             throw std::invalid_argument("--tolerance expects auto or a value >= 0, got '" + tolerance + "'");
-        options.filter = filter == "box" ? dsm::PixelFilter::Box
-                                         : filter == "triangle" ? dsm::PixelFilter::Triangle : dsm::PixelFilter::Gaussian;
+        options.filter = *dsm::pixelFilterFromName(filter);  // CLI11 checked the name
         if (!region.empty()) {
             std::istringstream in(region);
             char c1 = 0, c2 = 0, c3 = 0;

@@ -31,6 +31,7 @@
 #include "dsm/area_light.h"
 #include "dsm/error.h"
 #include "dsm/lookup.h"
+#include "dsm/map_json.h"
 #include "dsm/reader.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
@@ -80,13 +81,6 @@ struct Options {
     double zThreshold = 0.0;
     std::uint64_t seed = 1;
     std::string soft = "mtsm";
-};
-
-/// --area-light disk:R or rect:W,H, as the library takes it.
-struct AreaLightSpec {
-    dsm::AreaLightShape shape = dsm::AreaLightShape::Disk;
-    double halfWidth = 0.0;
-    double halfHeight = 0.0;
 };
 
 /// Thrown for an argument CLI11 accepted but that does not make sense.
@@ -159,34 +153,14 @@ ParsedLine parseQueryLine(std::string_view line) {
     return result;
 }
 
-/// "disk:R" (radius) or "rect:W,H" (full width and height), sizes finite and > 0.
-AreaLightSpec parseAreaLight(const std::string& text) {
-    const auto positive = [](std::string_view field) {
-        const std::optional<double> value = parseNumber(field);
-        return value && *value > 0.0 ? value : std::nullopt;
-    };
-    const std::string_view t = text;
-    AreaLightSpec spec;
-    if (t.starts_with("disk:")) {
-        if (const auto radius = positive(t.substr(5))) {
-            spec.halfWidth = spec.halfHeight = *radius;
-            return spec;
-        }
-    } else if (t.starts_with("rect:")) {
-        const std::string_view sizes = t.substr(5);
-        if (const auto comma = sizes.find(','); comma != std::string_view::npos) {
-            const auto width = positive(sizes.substr(0, comma));
-            const auto height = positive(sizes.substr(comma + 1));
-            if (width && height) {
-                spec.shape = dsm::AreaLightShape::Rectangle;
-                spec.halfWidth = *width / 2.0;
-                spec.halfHeight = *height / 2.0;
-                return spec;
-            }
-        }
+/// --area-light disk:R or rect:W,H, through the library's parser.
+dsm::AreaLightSize parseAreaLight(const std::string& text) {
+    try {
+        return dsm::AreaLightSize::parse(text);
+    } catch (const dsm::Error&) {
+        throw UsageError("--area-light " + quotedInput(text) +
+                         ": expected disk:R or rect:W,H with sizes > 0 (light-space units)");
     }
-    throw UsageError("--area-light " + quotedInput(text) +
-                     ": expected disk:R or rect:W,H with sizes > 0 (light-space units)");
 }
 
 /// "X,Y,Z" of --point.
@@ -486,12 +460,6 @@ private:
     AnswerWriter& writer_;
 };
 
-dsm::PixelFilter filterFromName(const std::string& name) {
-    if (name == "triangle") return dsm::PixelFilter::Triangle;
-    if (name == "gaussian") return dsm::PixelFilter::Gaussian;
-    return dsm::PixelFilter::Box;
-}
-
 Space spaceFromName(const std::string& name) {
     if (name == "light") return Space::Light;
     if (name == "raster") return Space::Raster;
@@ -602,16 +570,15 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
     Details details = Details::None;
     if (o.areaLight.empty()) {
         dsm::LookupOptions lookup;
-        lookup.filter = filterFromName(o.filter);
+        lookup.filter = *dsm::pixelFilterFromName(o.filter);  // CLI11 checked the name
         lookup.filterWidth = o.filterWidth;
         lookup.level = level;
         lookup.bias = o.bias;
         mode = std::make_unique<PointLookup>(map, spaceFromName(o.space), lookup);
     } else {
-        const AreaLightSpec spec = parseAreaLight(o.areaLight);
+        const dsm::AreaLightSize size = parseAreaLight(o.areaLight);
         try {
-            const dsm::AreaLight light = dsm::AreaLight::forMap(map->info(), spec.shape, spec.halfWidth,
-                                                                spec.halfHeight);
+            const dsm::AreaLight light = dsm::AreaLight::forMap(map->info(), size);
             tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
         } catch (const std::exception& e) {
             reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <string_view>
 #include <vector>
 
 #include "dsm/map_info.h"
@@ -11,6 +12,18 @@
 namespace dsm {
 
 enum class AreaLightShape : std::uint8_t { Disk = 0, Rectangle = 1 };
+
+/// A light's shape and half-sizes, as tools and bindings name it.
+struct AreaLightSize {
+    AreaLightShape shape = AreaLightShape::Disk;
+    double halfWidth = 0.0;
+    double halfHeight = 0.0;
+
+    /// "disk:R" (radius R) or "rect:W,H" (full width W and height H), sizes
+    /// finite and > 0, light-space units. Throws dsm::Error quoting the text
+    /// otherwise.
+    static AreaLightSize parse(std::string_view text);
+};
 
 /// A flat light centred on the light axis of a perspective map, in the plane
 /// light-space z = planeDepth() and facing along +z.
@@ -62,6 +75,9 @@ public:
     /// rectangle() a plane depth) or when the light does not fit the map
     /// (callers add the file's name).
     static AreaLight forMap(const MapInfo& info, AreaLightShape shape, double halfWidth, double halfHeight);
+    static AreaLight forMap(const MapInfo& info, const AreaLightSize& size) {
+        return forMap(info, size.shape, size.halfWidth, size.halfHeight);
+    }
     /// The area-light radius a map was built for (0 when it records none).
     static double recordedRadius(const MapInfo& info);
 

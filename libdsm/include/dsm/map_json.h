@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstddef>
+#include <optional>
 #include <string>
 #include <string_view>
 
@@ -32,5 +33,8 @@ std::size_t jsonNestingDepth(std::string_view text);
 /// Names used in the description (and by the tools' text output).
 const char* projectionName(Projection projection);
 const char* filterName(PixelFilter filter);
+/// The filter named "box", "triangle" or "gaussian" (as filterName() gives);
+/// nothing for any other text.
+std::optional<PixelFilter> pixelFilterFromName(std::string_view name);
 
 }  // namespace dsm
