@@ -6,12 +6,35 @@
 
 namespace dsm {
 
+/// What kind of failure a dsm::Error reports. Tools choose their exit status
+/// and the C API its dsm_result from this code, never from the message text.
+enum class ErrorCode {
+    io,           ///< a file could not be opened, read, written, renamed or synced
+    format,       ///< not a deep shadow map (or not the expected kind of file) at all
+    corrupt,      ///< a map or image whose bytes contradict the format
+    limit,        ///< an input exceeds a documented limit (size, nesting, memory)
+    argument,     ///< a caller passed a value outside the documented range
+    scene,        ///< a scene description is invalid (the message names its JSON pointer)
+    unsupported,  ///< a valid input that this version cannot handle (newer format, feature)
+    internal,     ///< a broken invariant inside libdsm: a bug to report
+};
+
+/// The code's name as printed in messages and documentation ("io", "corrupt", ...).
+const char* errorCodeName(ErrorCode code) noexcept;
+
 /// Every failure inside libdsm is reported by throwing dsm::Error. The message
 /// is one line and names what is wrong and where: the file, mip level, tile,
-/// pixel, vertex index or input line, whichever are known.
+/// pixel, vertex index, JSON pointer or input line, whichever are known.
 class Error : public std::runtime_error {
 public:
+    Error(ErrorCode code, const std::string& message);
+    /// A failure not yet classified; reported as ErrorCode::internal.
     explicit Error(const std::string& message);
+
+    ErrorCode code() const noexcept { return code_; }
+
+private:
+    ErrorCode code_;
 };
 
 }  // namespace dsm
