@@ -2,7 +2,8 @@
 // DeepShadowMap::pixel(), and writing pictures (image_io.h) read back through
 // OpenImageIO.
 #include <dsm/dsm.h>
-#include <dsm/image_io.h>
+#include "colour_ramp.h"
+#include "image_io.h"
 #include <dsm/map_images.h>
 #include <gtest/gtest.h>
 

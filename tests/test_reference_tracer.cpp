@@ -25,7 +25,7 @@
 #include <variant>
 #include <vector>
 
-#include "../libdsm/src/ray_caster.h"
+#include "ray_caster.h"
 
 namespace {
 

@@ -6,7 +6,9 @@
 #include <dsm/error.h>
 #include <dsm/scene.h>
 
+#if DSM_WITH_OPENVDB
 #include <openvdb/openvdb.h>
+#endif
 
 #include <algorithm>
 #include <cmath>
@@ -19,7 +21,7 @@
 #include <variant>
 #include <vector>
 
-#include "../libdsm/src/density.h"
+#include "density.h"
 #include "temp_dir.h"
 
 namespace {
@@ -853,6 +855,7 @@ TEST(Density, NoiseCloud) {
     EXPECT_GT(nearEdge, 0.5);
 }
 
+#if DSM_WITH_OPENVDB
 TEST(Density, VdbRoundTrip) {
     openvdb::initialize();
     dsm::test::TempDir dir;
@@ -910,6 +913,15 @@ TEST(Density, VdbRoundTrip) {
                                dir.path().string()),
                     "/objects/0/density/file: VDB file '" + (dir / "junk.vdb").string() + "': ");
 }
+#else
+TEST(Density, VdbNeedsOpenVdb) {
+    dsm::test::TempDir dir;
+    writeFile(dir / "cloud.vdb", "any bytes");
+    EXPECT_CONTAINS(parseError(sceneText(R"({"type": "volume", "density": {"type": "vdb", "file": "cloud.vdb"}})"),
+                               dir.path().string()),
+                    "built without OpenVDB");
+}
+#endif
 
 // ---------------------------------------------------------------------------
 // The shipped examples stay valid.

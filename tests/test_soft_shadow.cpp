@@ -35,6 +35,7 @@
 #include <thread>
 #include <vector>
 
+#include "area_light_size.h"
 #include "temp_dir.h"
 
 namespace {
@@ -212,17 +213,17 @@ TEST(AreaLight, DerivedPlaneIsTheScenesPushBack) {
 }
 
 TEST(AreaLight, SizesParseFromTheToolsSyntax) {
-    const auto disk = dsm::AreaLightSize::parse("disk:0.5");
+    const auto disk = dsm::parseAreaLightSize("disk:0.5");
     EXPECT_EQ(disk.shape, dsm::AreaLightShape::Disk);
     EXPECT_EQ(disk.halfWidth, 0.5);
     EXPECT_EQ(disk.halfHeight, 0.5);
-    const auto rect = dsm::AreaLightSize::parse("rect:2,1");
+    const auto rect = dsm::parseAreaLightSize("rect:2,1");
     EXPECT_EQ(rect.shape, dsm::AreaLightShape::Rectangle);
     EXPECT_EQ(rect.halfWidth, 1.0);
     EXPECT_EQ(rect.halfHeight, 0.5);
     for (const char* bad : {"disk:", "disk:0", "disk:-1", "disk:x", "disk:1,2", "rect:1", "rect:1,0", "rect:1,2,3",
                             "sphere:1", "disk:inf", ""})
-        EXPECT_THROW(dsm::AreaLightSize::parse(bad), dsm::Error) << bad;
+        EXPECT_THROW(dsm::parseAreaLightSize(bad), dsm::Error) << bad;
 }
 
 TEST(AreaLight, ForMapPlacesTheLightWhereTheBuildPutIt) {

@@ -18,7 +18,7 @@
 #include <thread>
 #include <vector>
 
-#include "../libdsm/src/tile_cache_impl.h"
+#include "tile_cache_impl.h"
 
 namespace {
 

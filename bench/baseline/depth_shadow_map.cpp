@@ -1,4 +1,4 @@
-#include "dsm/depth_shadow_map.h"
+#include "depth_shadow_map.h"
 
 #include <algorithm>
 #include <cmath>

@@ -1,9 +1,9 @@
-// The conventional depth shadow map baseline (dsm/depth_shadow_map.h): its
+// The conventional depth shadow map baseline (bench/baseline/depth_shadow_map.h): its
 // own sample path and percentage-closer filtering, checked on scenes with
 // known answers under an orthographic light of one world unit per pixel.
 #include <gtest/gtest.h>
 
-#include <dsm/depth_shadow_map.h>
+#include "depth_shadow_map.h"
 #include <dsm/error.h>
 #include <dsm/scene.h>
 

@@ -25,7 +25,7 @@
 #include <nlohmann/json.hpp>
 
 #include <dsm/area_light.h>
-#include <dsm/image_io.h>
+#include "image_io.h"
 #include <dsm/map_images.h>
 #include <dsm/reference_tracer.h>
 #include <dsm/sampler.h>

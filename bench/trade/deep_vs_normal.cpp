@@ -12,7 +12,7 @@
 #include <cstdio>
 #include <limits>
 
-#include <dsm/depth_shadow_map.h>
+#include "depth_shadow_map.h"
 
 #include "trade.h"
 

@@ -22,7 +22,8 @@
 #include "dsm/error.h"
 #include "dsm/lookup.h"
 #include "dsm/map_info.h"
-#include "dsm/map_json.h"
+#include "area_light_size.h"
+#include "map_json.h"
 #include "dsm/reader.h"
 #include "dsm/sampler.h"
 #include "dsm/scene.h"
@@ -271,7 +272,7 @@ private:
     dsm::AreaLight parseLight(const std::string& text) const {
         dsm::AreaLightSize size;
         try {
-            size = dsm::AreaLightSize::parse(text);
+            size = dsm::parseAreaLightSize(text);
         } catch (const dsm::Error& e) {
             throw py::value_error(e.what());
         }

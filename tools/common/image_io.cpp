@@ -1,4 +1,4 @@
-#include "dsm/image_io.h"
+#include "image_io.h"
 
 #include <algorithm>
 #include <cerrno>

@@ -1,10 +1,12 @@
-#include "dsm/map_json.h"
+#include "map_json.h"
 
 #include <algorithm>
 #include <cstddef>
 #include <string_view>
 
 #include <nlohmann/json.hpp>
+
+#include "dsm/names.h"
 
 namespace dsm {
 
@@ -39,29 +41,6 @@ std::size_t jsonNestingDepth(std::string_view text) {
         }
     }
     return deepest;
-}
-
-const char* projectionName(Projection projection) {
-    switch (projection) {
-        case Projection::Perspective: return "perspective";
-        case Projection::Orthographic: return "orthographic";
-    }
-    return "unknown";
-}
-
-const char* filterName(PixelFilter filter) {
-    switch (filter) {
-        case PixelFilter::Box: return "box";
-        case PixelFilter::Triangle: return "triangle";
-        case PixelFilter::Gaussian: return "gaussian";
-    }
-    return "unknown";
-}
-
-std::optional<PixelFilter> pixelFilterFromName(std::string_view name) {
-    for (const PixelFilter f : {PixelFilter::Box, PixelFilter::Triangle, PixelFilter::Gaussian})
-        if (name == filterName(f)) return f;
-    return std::nullopt;
 }
 
 std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent) {

@@ -4,11 +4,11 @@
 #pragma once
 
 #include <cstddef>
-#include <optional>
 #include <string>
 #include <string_view>
 
 #include "dsm/map_info.h"
+#include "dsm/names.h"
 
 namespace dsm {
 
@@ -29,12 +29,5 @@ inline constexpr std::size_t kMaxMetadataDepth = 100;
 /// Deepest nesting of arrays and objects in JSON text (strings skipped; the
 /// text need not be valid JSON).
 std::size_t jsonNestingDepth(std::string_view text);
-
-/// Names used in the description (and by the tools' text output).
-const char* projectionName(Projection projection);
-const char* filterName(PixelFilter filter);
-/// The filter named "box", "triangle" or "gaussian" (as filterName() gives);
-/// nothing for any other text.
-std::optional<PixelFilter> pixelFilterFromName(std::string_view name);
 
 }  // namespace dsm

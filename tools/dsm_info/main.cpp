@@ -24,10 +24,11 @@
 #include <nlohmann/json.hpp>
 
 #include "dsm/error.h"
-#include "dsm/image_io.h"
+#include "colour_ramp.h"
+#include "image_io.h"
 #include "dsm/map_images.h"
 #include "dsm/map_info.h"
-#include "dsm/map_json.h"
+#include "map_json.h"
 #include "dsm/reader.h"
 #include "tool_support.h"
 

@@ -31,7 +31,8 @@
 #include "dsm/area_light.h"
 #include "dsm/error.h"
 #include "dsm/lookup.h"
-#include "dsm/map_json.h"
+#include "area_light_size.h"
+#include "map_json.h"
 #include "dsm/reader.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
@@ -156,7 +157,7 @@ ParsedLine parseQueryLine(std::string_view line) {
 /// --area-light disk:R or rect:W,H, through the library's parser.
 dsm::AreaLightSize parseAreaLight(const std::string& text) {
     try {
-        return dsm::AreaLightSize::parse(text);
+        return dsm::parseAreaLightSize(text);
     } catch (const dsm::Error&) {
         throw UsageError("--area-light " + quotedInput(text) +
                          ": expected disk:R or rect:W,H with sizes > 0 (light-space units)");

@@ -11,10 +11,13 @@
 #include <string>
 #include <system_error>
 
+#if DSM_WITH_OPENVDB
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
+#endif
 
 #include "dsm/error.h"
+#include "splitmix64.h"
 #include "text.h"
 
 namespace dsm {
@@ -48,21 +51,8 @@ private:
 // in octaves (fBm), shaped by a smooth falloff inside the box's inscribed
 // ellipsoid.
 
-std::uint64_t mix64(std::uint64_t z) {
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-class SplitMix64 {
-public:
-    explicit SplitMix64(std::uint64_t seed) : state_(seed) {}
-    std::uint64_t next() { return mix64(state_ += 0x9E3779B97F4A7C15ull); }
-    double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
-
-private:
-    std::uint64_t state_;
-};
+using detail::mix64;
+using detail::SplitMix64;
 
 double fade(double t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }
 double lerp(double t, double a, double b) { return a + t * (b - a); }
@@ -170,7 +160,8 @@ private:
 };
 
 // ---------------------------------------------------------------------------
-// OpenVDB.
+// OpenVDB (when built with it: DSM_WITH_OPENVDB).
+#if DSM_WITH_OPENVDB
 
 void initializeOpenVdb() {
     static std::once_flag once;
@@ -224,6 +215,11 @@ public:
 private:
     openvdb::FloatGrid::ConstPtr grid_;
 };
+#else
+[[noreturn]] void noOpenVdb(const VdbDensity& vdb) {
+    throw Error(ErrorCode::unsupported, "VDB file '" + vdb.file + "': this libdsm was built without OpenVDB");
+}
+#endif
 
 }  // namespace
 
@@ -238,10 +234,19 @@ std::unique_ptr<DensityField> makeDensityField(const Volume& volume) {
     if (const auto* n = std::get_if<NoiseCloudDensity>(&volume.density))
         return std::make_unique<NoiseCloudField>(volume, *n);
     const auto& vdb = std::get<VdbDensity>(volume.density);
+#if DSM_WITH_OPENVDB
     return std::make_unique<VdbField>(volume, loadFloatGrid(vdb));
+#else
+    noOpenVdb(vdb);
+#endif
 }
 
 void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
+#if !DSM_WITH_OPENVDB
+    (void)boundsMin;
+    (void)boundsMax;
+    noOpenVdb(vdb);
+#else
     const openvdb::FloatGrid::ConstPtr grid = loadFloatGrid(vdb);
     const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
     if (box.empty()) throw Error("VDB file '" + vdb.file + "': grid '" + vdb.grid + "' has no active voxels");
@@ -257,6 +262,7 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
             boundsMax[i] = std::max(boundsMax[i], w[static_cast<int>(i)]);
         }
     }
+#endif
 }
 
 }  // namespace dsm

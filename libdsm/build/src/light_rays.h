@@ -9,26 +9,9 @@
 
 #include "dsm/map_info.h"
 #include "dsm/scene.h"
+#include "splitmix64.h"
 
 namespace dsm::detail {
-
-/// SplitMix64: small and fast, with the same output everywhere, so sample
-/// positions depend only on the seed and the pixel.
-class SplitMix64 {
-public:
-    explicit SplitMix64(std::uint64_t seed) : state_(seed) {}
-    std::uint64_t next() {
-        std::uint64_t z = (state_ += 0x9E3779B97F4A7C15ull);
-        z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-        z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-        return z ^ (z >> 31);
-    }
-    /// Uniform in [0, 1).
-    double uniform() { return static_cast<double>(next() >> 11) * 0x1p-53; }
-
-private:
-    std::uint64_t state_;
-};
 
 /// A seed for pixel (x, y) derived from a map-wide seed.
 inline std::uint64_t pixelSeed(std::uint64_t seed, std::uint32_t x, std::uint32_t y) {

@@ -16,9 +16,10 @@
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
 #include "dsm/error.h"
-#include "dsm/map_json.h"
+#include "dsm/names.h"
 #include "dsm/writer.h"
 #include "light_rays.h"
+#include "pixel_filter.h"
 #include "ray_caster.h"
 #include "text.h"
 
@@ -39,11 +40,9 @@ double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
         case PixelFilter::Box:
             return 1.0;
         case PixelFilter::Triangle:
-            return (1.0 - ax / radius) * (1.0 - ay / radius);
-        case PixelFilter::Gaussian: {
-            const double s = 0.5 * radius;
-            return std::exp(-(dx * dx + dy * dy) / (2.0 * s * s));
-        }
+            return detail::triangleWeight(ax, radius) * detail::triangleWeight(ay, radius);
+        case PixelFilter::Gaussian:
+            return detail::gaussianWeight(dx * dx + dy * dy, radius);
     }
     return 0.0;
 }

@@ -23,7 +23,9 @@
 
 #include "density.h"
 #include "dsm/error.h"
+#include "splitmix64.h"
 #include "text.h"
+#include "vec3_math.h"
 
 namespace dsm {
 namespace {
@@ -33,18 +35,13 @@ using json = nlohmann::json;
 constexpr double kPi = 3.14159265358979323846;
 constexpr std::uint32_t kMaxResolution = 1u << 17;  // the reader's default limit
 
-// ---------------------------------------------------------------------------
-// Small vector helpers.
-
-Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
-Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec3 mul(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
-double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-Vec3 cross(const Vec3& a, const Vec3& b) {
-    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double length(const Vec3& a) { return std::sqrt(dot(a, a)); }
-Vec3 normalized(const Vec3& a) { return mul(a, 1.0 / length(a)); }
+using detail::add;
+using detail::cross;
+using detail::dot;
+using detail::length;
+using detail::normalized;
+using detail::scale;
+using detail::sub;
 
 using Mat4 = std::array<double, 16>;
 constexpr Mat4 kIdentity{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
@@ -61,30 +58,18 @@ Mat4 multiply(const Mat4& a, const Mat4& b) {
 // Deterministic random numbers: SplitMix64 and an explicit mapping to doubles,
 // so generated content is the same with every standard library.
 
-std::uint64_t mix64(std::uint64_t z) {
-    z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ull;
-    z = (z ^ (z >> 27)) * 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-class SplitMix64 {
+class SceneRandom : public detail::SplitMix64 {
 public:
-    explicit SplitMix64(std::uint64_t seed) : state_(seed) {}
-    std::uint64_t next() { return mix64(state_ += 0x9E3779B97F4A7C15ull); }
-    /// Uniform in [0, 1): the top 53 bits as a binary fraction.
-    double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
+    using SplitMix64::SplitMix64;
     /// Uniform on the unit sphere, by rejection from the cube (no libm calls
     /// but sqrt, which IEEE 754 rounds exactly).
     Vec3 unitVector() {
         for (;;) {
             const Vec3 v{2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0};
             const double s = dot(v, v);
-            if (s > 1e-6 && s <= 1.0) return mul(v, 1.0 / std::sqrt(s));
+            if (s > 1e-6 && s <= 1.0) return scale(v, 1.0 / std::sqrt(s));
         }
     }
-
-private:
-    std::uint64_t state_;
 };
 
 // ---------------------------------------------------------------------------
@@ -498,8 +483,8 @@ Quad parsePlane(const Parser& p, const json& v, const std::string& path) {
     const Vec3 a = std::abs(n[1]) < 0.9 ? Vec3{0.0, 1.0, 0.0} : Vec3{1.0, 0.0, 0.0};
     const Vec3 u = normalized(cross(a, n));
     const Vec3 w = cross(n, u);
-    q.halfU = mul(u, 0.5 * su);
-    q.halfV = mul(w, 0.5 * sv);
+    q.halfU = scale(u, 0.5 * su);
+    q.halfV = scale(w, 0.5 * sv);
     return q;
 }
 
@@ -796,7 +781,7 @@ LightCamera lightCamera(const LightDescription& light) {
             // Xie et al. 2007, eq. 4, with the narrower half-angle so the
             // pushed-back frustum contains every point's frustum on both axes.
             const double d = light.areaLightRadius / (halfSize * std::min(ax, ay));
-            eye = sub(eye, mul(f, d));
+            eye = sub(eye, scale(f, d));
             camera.nearPlane += d;
         }
     } else {
@@ -830,15 +815,15 @@ Curves generateHairBall(const HairBallParameters& h) {
     };
     for (std::uint32_t i = 0; i < h.count; ++i) {
         // One independent stream per hair: hair i is the same whatever the count.
-        SplitMix64 rng(mix64((static_cast<std::uint64_t>(h.seed) << 32) | i));
+        SceneRandom rng(detail::mix64((static_cast<std::uint64_t>(h.seed) << 32) | i));
         const Vec3 normal = rng.unitVector();
-        Vec3 point = add(h.center, mul(normal, h.radius));
+        Vec3 point = add(h.center, scale(normal, h.radius));
         // Outwards, tilted by up to ~24 degrees.
-        Vec3 direction = normalized(add(normal, mul(rng.unitVector(), 0.4)));
+        Vec3 direction = normalized(add(normal, scale(rng.unitVector(), 0.4)));
         // A unit vector perpendicular to the direction, from v (or a new random one).
         auto perpendicular = [&](Vec3 v) {
             for (;;) {
-                const Vec3 w = sub(v, mul(direction, dot(v, direction)));
+                const Vec3 w = sub(v, scale(direction, dot(v, direction)));
                 if (length(w) > 1e-3) return normalized(w);
                 v = rng.unitVector();
             }
@@ -848,9 +833,9 @@ Curves generateHairBall(const HairBallParameters& h) {
         for (std::uint32_t s = 0; s < segments; ++s) {
             // Turn about a slowly wandering axis by about curl * step radians.
             const double turn = h.curl * step * (0.5 + rng.uniform());
-            axis = perpendicular(add(axis, mul(rng.unitVector(), 0.5)));
-            direction = normalized(add(direction, mul(cross(axis, direction), turn)));
-            point = add(point, mul(direction, step));
+            axis = perpendicular(add(axis, scale(rng.unitVector(), 0.5)));
+            direction = normalized(add(direction, scale(cross(axis, direction), turn)));
+            point = add(point, scale(direction, step));
             curves.points.push_back(toFloat(point));
         }
     }

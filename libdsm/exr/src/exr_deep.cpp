@@ -47,7 +47,7 @@
 
 #include "dsm/compressor.h"
 #include "dsm/error.h"
-#include "dsm/map_json.h"
+#include "dsm/names.h"
 #include "dsm/reader.h"
 #include "dsm/writer.h"
 #include "text.h"

@@ -43,6 +43,7 @@
 #include <vector>
 
 #include "dsm/error.h"
+#include "splitmix64.h"
 #include "text.h"
 
 namespace dsm {
@@ -51,14 +52,8 @@ namespace {
 
 struct TileKeyHash {
     std::size_t operator()(const TileKey& k) const noexcept {
-        // splitmix64 finaliser over the three fields.
-        std::uint64_t h = k.file * 0x9E3779B97F4A7C15ull ^ ((std::uint64_t(k.level) << 32) | k.tile);
-        h ^= h >> 30;
-        h *= 0xBF58476D1CE4E5B9ull;
-        h ^= h >> 27;
-        h *= 0x94D049BB133111EBull;
-        h ^= h >> 31;
-        return static_cast<std::size_t>(h);
+        return static_cast<std::size_t>(
+            detail::mix64(k.file * 0x9E3779B97F4A7C15ull ^ ((std::uint64_t(k.level) << 32) | k.tile)));
     }
 };
 

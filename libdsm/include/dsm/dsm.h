@@ -1,26 +1,23 @@
-// libdsm: deep shadow maps. This header includes the whole public API.
+// libdsm: deep shadow maps. This header includes the renderer-facing core
+// (dsm::core: functions, the file, lookups, soft shadows, merging). The
+// heavy components have their own: dsm/build.h, dsm/exr.h, dsm/reference.h.
 #pragma once
 
 #include "dsm/area_light.h"
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
-#include "dsm/depth_shadow_map.h"
 #include "dsm/error.h"
-#include "dsm/exr_deep.h"
-#include "dsm/image_io.h"
 #include "dsm/lookup.h"
 #include "dsm/map_images.h"
 #include "dsm/map_info.h"
-#include "dsm/map_json.h"
 #include "dsm/merge.h"
+#include "dsm/names.h"
 #include "dsm/reader.h"
-#include "dsm/reference_tracer.h"
-#include "dsm/sampler.h"
-#include "dsm/scene.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/sweep.h"
 #include "dsm/tile_cache.h"
 #include "dsm/transmittance.h"
+#include "dsm/vec3.h"
 #include "dsm/vertex_sink.h"
 #include "dsm/visibility.h"
 #include "dsm/visibility_product.h"

@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "dsm/error.h"
+#include "pixel_filter.h"
 #include "reader_impl.h"
 #include "text.h"
 
@@ -46,13 +47,11 @@ void axisWeights(PixelFilter filter, double c, double w, std::uint32_t extent, A
                 break;
             }
             case PixelFilter::Triangle:
-                k = std::max(0.0, 1.0 - std::abs(d) / r);
+                k = detail::triangleWeight(d, r);
                 break;
-            case PixelFilter::Gaussian: {
-                const double s = 0.5 * r;
-                k = std::abs(d) < r ? std::exp(-d * d / (2.0 * s * s)) : 0.0;
+            case PixelFilter::Gaussian:
+                k = std::abs(d) < r ? detail::gaussianWeight(d * d, r) : 0.0;
                 break;
-            }
         }
         out.weights.push_back(k);
     }

@@ -19,7 +19,7 @@
 #include <nlohmann/json.hpp>
 
 #include "dsm/error.h"
-#include "dsm/map_json.h"
+#include "dsm/names.h"
 #include "dsm/reader.h"
 #include "dsm/visibility_product.h"
 #include "dsm/writer.h"

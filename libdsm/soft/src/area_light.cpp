@@ -3,7 +3,6 @@
 #include <nlohmann/json.hpp>
 
 #include <algorithm>
-#include <charconv>
 #include <optional>
 #include <system_error>
 #include <bit>
@@ -11,6 +10,7 @@
 #include <numbers>
 
 #include "dsm/error.h"
+#include "splitmix64.h"
 #include "text.h"
 
 namespace dsm {
@@ -18,25 +18,6 @@ namespace dsm {
 using detail::concat;
 
 namespace {
-
-std::uint64_t mix(std::uint64_t z) {
-    z ^= z >> 30;
-    z *= 0xBF58476D1CE4E5B9ull;
-    z ^= z >> 27;
-    z *= 0x94D049BB133111EBull;
-    return z ^ (z >> 31);
-}
-
-// SplitMix64: tiny, fast, and good enough for jitter.
-class Random {
-public:
-    explicit Random(std::uint64_t seed) : state_(seed) {}
-    std::uint64_t next() { return mix(state_ += 0x9E3779B97F4A7C15ull); }
-    double uniform() { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
-
-private:
-    std::uint64_t state_;
-};
 
 // Shirley & Chiu's concentric map from [0,1)^2 to the unit disk: keeps
 // neighbouring strata neighbours, unlike the polar map.
@@ -116,36 +97,6 @@ AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, doub
     return make(camera, AreaLightShape::Rectangle, halfWidth, halfHeight, planeDepth);
 }
 
-AreaLightSize AreaLightSize::parse(std::string_view text) {
-    const auto positive = [](std::string_view field) -> std::optional<double> {
-        if (!field.empty() && field.front() == '+') field.remove_prefix(1);
-        double value = 0.0;
-        const auto [end, error] = std::from_chars(field.data(), field.data() + field.size(), value);
-        if (error != std::errc() || end != field.data() + field.size() || !std::isfinite(value) || !(value > 0.0))
-            return std::nullopt;
-        return value;
-    };
-    AreaLightSize size;
-    if (text.starts_with("disk:")) {
-        if (const auto radius = positive(text.substr(5))) {
-            size.halfWidth = size.halfHeight = *radius;
-            return size;
-        }
-    } else if (text.starts_with("rect:")) {
-        const std::string_view sizes = text.substr(5);
-        if (const auto comma = sizes.find(','); comma != std::string_view::npos) {
-            const auto width = positive(sizes.substr(0, comma)), height = positive(sizes.substr(comma + 1));
-            if (width && height) {
-                size.shape = AreaLightShape::Rectangle;
-                size.halfWidth = *width / 2.0;
-                size.halfHeight = *height / 2.0;
-                return size;
-            }
-        }
-    }
-    throw Error(concat("area light '", text, "': expected disk:R or rect:W,H with sizes > 0 (light-space units)"));
-}
-
 double AreaLight::recordedRadius(const MapInfo& info) {
     const nlohmann::json metadata = nlohmann::json::parse(info.metadata, nullptr, /*allow_exceptions=*/false);
     if (!metadata.is_object()) return 0.0;
@@ -193,9 +144,9 @@ void AreaLight::lightSpaceSamples(const Vec3& receiver, int count, std::uint64_t
         throw Error(concat("area light: receiver ", receiver[0], ",", receiver[1], ",", receiver[2], " is not finite"));
     // Seeded by the receiver's bits (+0.0 and -0.0 alike), so the samples of
     // a point never change between frames or threads.
-    std::uint64_t s = mix(seed ^ 0x5DEECE66Dull);
-    for (double q : receiver) s = mix(s ^ std::bit_cast<std::uint64_t>(q == 0.0 ? 0.0 : q));
-    Random rng(s);
+    std::uint64_t s = detail::mix64(seed ^ 0x5DEECE66Dull);
+    for (double q : receiver) s = detail::mix64(s ^ std::bit_cast<std::uint64_t>(q == 0.0 ? 0.0 : q));
+    detail::SplitMix64 rng(s);
     const auto n = static_cast<std::uint32_t>(count);
     const std::uint32_t gy = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(n)))));
     const std::uint32_t gx = (n + gy - 1) / gy;

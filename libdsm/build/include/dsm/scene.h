@@ -10,10 +10,10 @@
 #include <vector>
 
 #include "dsm/map_info.h"
+#include "dsm/vec3.h"
 
 namespace dsm {
 
-using Vec3 = std::array<double, 3>;
 using Rgb = std::array<float, 3>;
 
 /// The light as a camera. A spot light is a perspective camera at `position`

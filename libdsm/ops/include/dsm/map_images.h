@@ -49,12 +49,6 @@ FloatImage opacityImage(const DeepShadowMap& map, unsigned level);
 /// (exact as float up to 2^24). Same reading and failures as visibilitySlice().
 FloatImage vertexCountImage(const DeepShadowMap& map, unsigned level);
 
-/// A one-channel image mapped through a colour ramp to RGB in [0, 1] for 8-bit
-/// pictures: value / `maximum` goes black (0), blue, magenta, orange to white
-/// (1). Values outside [0, maximum] are clamped; `maximum` <= 0 gives black.
-/// Throws dsm::Error when `image` does not have one channel.
-FloatImage colourRamp(const FloatImage& image, float maximum);
-
 /// Distribution of vertices per pixel over every pixel of a level, empty
 /// pixels (0 vertices) included.
 struct VertexHistogram {

@@ -3,26 +3,21 @@
 #pragma once
 
 #include <cstdint>
-#include <string_view>
 #include <vector>
 
 #include "dsm/map_info.h"
-#include "dsm/scene.h"
+#include "dsm/vec3.h"
 
 namespace dsm {
 
 enum class AreaLightShape : std::uint8_t { Disk = 0, Rectangle = 1 };
 
-/// A light's shape and half-sizes, as tools and bindings name it.
+/// A light's shape and half-sizes.
 struct AreaLightSize {
     AreaLightShape shape = AreaLightShape::Disk;
     double halfWidth = 0.0;
     double halfHeight = 0.0;
 
-    /// "disk:R" (radius R) or "rect:W,H" (full width W and height H), sizes
-    /// finite and > 0, light-space units. Throws dsm::Error quoting the text
-    /// otherwise.
-    static AreaLightSize parse(std::string_view text);
 };
 
 /// A flat light centred on the light axis of a perspective map, in the plane
