@@ -1,4 +1,4 @@
-// Small vector and affine-matrix helpers shared by the ray casters (internal).
+// Affine-matrix helpers (internal), shared by the area lights and the ray casters.
 // An Affine holds rows 0..2 of a row-major 4x4 matrix (the bottom row is
 // 0 0 0 1), as scene transforms and light cameras store them.
 #pragma once
@@ -9,7 +9,7 @@
 #include <string>
 
 #include "dsm/error.h"
-#include "dsm/scene.h"
+#include "dsm/vec3.h"
 #include "text.h"
 #include "vec3_math.h"
 

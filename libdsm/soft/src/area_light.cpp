@@ -9,6 +9,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "affine.h"
 #include "dsm/error.h"
 #include "splitmix64.h"
 #include "text.h"
@@ -65,16 +66,8 @@ AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, doubl
                            ") does not fit the map's frustum at plane depth ", planeDepth, " (needs >= ", fit,
                            "): the map was built for a smaller area light"));
 
-    // Inverse of the affine world-to-light matrix, by the adjugate.
-    const auto& m = camera.worldToLight;
-    const double a = m[0], b = m[1], c = m[2], d = m[4], e = m[5], f = m[6], g = m[8], h = m[9], k = m[10];
-    const double det = a * (e * k - f * h) - b * (d * k - f * g) + c * (d * h - e * g);
-    if (!(std::abs(det) > 1e-300) || !std::isfinite(det))
-        throw Error("area light: the light camera's world-to-light matrix is singular");
-    const double inv[9] = {(e * k - f * h) / det, (c * h - b * k) / det, (b * f - c * e) / det,
-                           (f * g - d * k) / det, (a * k - c * g) / det, (c * d - a * f) / det,
-                           (d * h - e * g) / det, (b * g - a * h) / det, (a * e - b * d) / det};
-    const double t[3] = {m[3], m[7], m[11]};
+    const detail::Affine lightToWorld = detail::inverseAffine(
+        detail::affineOf(camera.worldToLight), "area light: the light camera's world-to-light matrix");
 
     AreaLight light;
     light.camera_ = camera;
@@ -82,10 +75,7 @@ AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, doubl
     light.halfWidth_ = halfWidth;
     light.halfHeight_ = halfHeight;
     light.planeDepth_ = planeDepth;
-    for (int r = 0; r < 3; ++r) {
-        for (int col = 0; col < 3; ++col) light.lightToWorld_[4 * r + col] = inv[3 * r + col];
-        light.lightToWorld_[4 * r + 3] = -(inv[3 * r] * t[0] + inv[3 * r + 1] * t[1] + inv[3 * r + 2] * t[2]);
-    }
+    light.lightToWorld_ = lightToWorld;
     return light;
 }
 
