@@ -1,3 +1,4 @@
+cmake_minimum_required(VERSION 3.25)
 # Installs libdsm into a fresh prefix and builds consumers against it.
 #   MODE=static  install BUILD_DIR; a consumer of every component (consumer/,
 #                find_package(dsm)) and a C++17 consumer of dsm::core alone
