@@ -35,6 +35,7 @@
 #include "dsm/reader.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
+#include "query_line.h"
 #include "tool_support.h"
 
 namespace {
@@ -43,8 +44,6 @@ using namespace dsm::tools;
 
 constexpr const char* kToolName = "dsm-lookup";
 constexpr const char* kDocumentation = "docs/dsm-lookup.md";
-/// Longer lines are reported as bad rather than held in memory whole.
-constexpr std::size_t kMaxLineBytes = 4096;
 /// The process-wide cache's budget (tile_cache.h), used unless --cache-mb says otherwise.
 constexpr double kDefaultCacheMiB = 256.0;
 /// Keeps the byte count well inside size_t.
@@ -89,69 +88,7 @@ struct UsageError : std::runtime_error {
 };
 
 // ---------------------------------------------------------------------------
-// Parsing numbers and query lines (the line format is the tool's, not libdsm's)
-
-/// Makes a piece of input safe to quote in a one-line message.
-std::string quotedInput(std::string_view text) {
-    constexpr std::size_t kMaxShown = 32;
-    std::string out = "'";
-    for (std::size_t i = 0; i < text.size() && i < kMaxShown; ++i) {
-        const auto c = static_cast<unsigned char>(text[i]);
-        out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-    }
-    if (text.size() > kMaxShown) out += "...";
-    return out + "'";
-}
-
-/// A finite decimal number filling all of `text` (a leading '+' allowed), or
-/// nothing.
-std::optional<double> parseNumber(std::string_view text) {
-    if (!text.empty() && text.front() == '+') text.remove_prefix(1);
-    double value = 0.0;
-    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-    if (error != std::errc() || end != text.data() + text.size() || !std::isfinite(value)) return std::nullopt;
-    return value;
-}
-
-/// What one input line holds: nothing to answer (blank or comment), a point,
-/// or a complaint about it.
-struct ParsedLine {
-    enum class Kind { Skip, Point, Bad } kind = Kind::Skip;
-    std::array<double, 3> point{};
-    std::string problem;
-};
-
-/// "x y z": three finite numbers separated by spaces, tabs or commas; '#'
-/// starts a comment that runs to the end of the line.
-ParsedLine parseQueryLine(std::string_view line) {
-    ParsedLine result;
-    if (const auto hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
-    const auto isSeparator = [](char c) { return c == ' ' || c == '\t' || c == ',' || c == '\r'; };
-    std::vector<std::string_view> fields;
-    std::size_t i = 0;
-    while (i < line.size()) {
-        while (i < line.size() && isSeparator(line[i])) ++i;
-        const std::size_t start = i;
-        while (i < line.size() && !isSeparator(line[i])) ++i;
-        if (i > start) fields.push_back(line.substr(start, i - start));
-    }
-    if (fields.empty()) return result;
-    result.kind = ParsedLine::Kind::Bad;
-    if (fields.size() != 3) {
-        result.problem = "expected 3 numbers (x y z), found " + std::to_string(fields.size()) + " fields";
-        return result;
-    }
-    for (std::size_t k = 0; k < 3; ++k) {
-        const std::optional<double> value = parseNumber(fields[k]);
-        if (!value) {
-            result.problem = std::string("xyz").substr(k, 1) + " " + quotedInput(fields[k]) + " is not a finite number";
-            return result;
-        }
-        result.point[k] = *value;
-    }
-    result.kind = ParsedLine::Kind::Point;
-    return result;
-}
+// Parsing arguments (query lines: query_line.h)
 
 /// --area-light disk:R or rect:W,H, through the library's parser.
 dsm::AreaLightSize parseAreaLight(const std::string& text) {
@@ -170,37 +107,6 @@ std::array<double, 3> parsePointArgument(const std::string& text) {
         throw UsageError("--point " + quotedInput(text) + ": expected three finite numbers X,Y,Z");
     return parsed.point;
 }
-
-/// Reads lines of at most kMaxLineBytes; longer ones are consumed to their end
-/// and flagged. Reads the stream buffer directly: a line is answered as soon as
-/// its newline arrives, whatever follows.
-class LineReader {
-public:
-    explicit LineReader(std::streambuf& in) : in_(in) {}
-
-    /// False at the end of the input. `tooLong` is set for an overlong line,
-    /// of which `line` holds the start.
-    bool next(std::string& line, bool& tooLong) {
-        line.clear();
-        tooLong = false;
-        bool any = false;
-        for (;;) {
-            const int c = in_.sbumpc();
-            if (c == std::char_traits<char>::eof()) return any;
-            any = true;
-            if (c == '\n') return true;
-            if (line.size() < kMaxLineBytes) line.push_back(static_cast<char>(c));
-            else tooLong = true;
-        }
-    }
-
-    /// True when the next character can be read without waiting: the caller
-    /// flushes its answers before a read that may block.
-    bool inputWaiting() { return in_.in_avail() > 0; }
-
-private:
-    std::streambuf& in_;
-};
 
 // ---------------------------------------------------------------------------
 // Query modes: how a point becomes an answer.
