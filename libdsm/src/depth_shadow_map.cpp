@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "dsm/threads.h"
 #include "dsm/error.h"
 #include "light_rays.h"
 #include "ray_caster.h"
@@ -34,7 +35,7 @@ DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions&
 
     const detail::LightRayFrame frame = detail::lightRayFrame(map.camera_, map.width_, map.height_);
     const RayCaster caster(scene);
-    tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic : static_cast<int>(options.threads));
+    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads)));
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, map.height_), [&](const auto& rows) {
             std::vector<RaySurfaceHit> hits;

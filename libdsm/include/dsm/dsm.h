@@ -20,6 +20,7 @@
 #include "dsm/soft_shadow.h"
 #include "dsm/sweep.h"
 #include "dsm/tile_cache.h"
+#include "dsm/threads.h"
 #include "dsm/transmittance.h"
 #include "dsm/vertex_sink.h"
 #include "dsm/visibility.h"
