@@ -15,6 +15,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <memory>
 #include <numbers>
@@ -499,6 +500,15 @@ constexpr std::uint64_t kMaxSamplesPerBand = 1ull << 27;
 
 std::string quoted(const std::string& path) { return concat("'", path, "'"); }
 
+/// A maxDeviation or maxLinearError option: <= 0 for the default, else in
+/// [kMinExrErrorBound, 1]. NaN is refused rather than taken for the default.
+void checkErrorBoundOption(double value, const char* what) {
+    if (value <= 0.0) return;
+    if (!(value >= kMinExrErrorBound && value <= 1.0))
+        throw Error(ErrorCode::argument, concat(what, " ", value, " is outside [", kMinExrErrorBound,
+                                                ", 1] (float32 samples cannot keep a tighter bound)"));
+}
+
 /// A temporary file beside `path`, removed unless commit() renamed it.
 class TemporaryFile {
 public:
@@ -594,6 +604,7 @@ struct Band {
 
 ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
                               const ExrExportOptions& options) {
+    checkErrorBoundOption(options.maxDeviation, "deep EXR export: the largest deviation");
     const auto map = DeepShadowMap::open(dsmPath);
     const MapInfo& info = map->info();
     if (options.level >= info.levels.size())
@@ -710,13 +721,80 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
 
 namespace {
 
+/// Reads the attribute list of every header of an OpenEXR file without
+/// OpenEXR and refuses a size no file of this length can hold. OpenEXR 3.1
+/// allocates the size an attribute claims before reading it, so a few damaged
+/// bytes would otherwise cost gigabytes. The layout (magic, version, then
+/// name\0 type\0 int32-size value ..., a header ending in an empty name,
+/// and multi-part files ending their headers with one more) is OpenEXR's
+/// documented file layout. Anything else is left for OpenEXR to judge.
+void checkExrHeaderSizes(const std::string& path, std::uint64_t fileSize) {
+    std::ifstream in(path, std::ios::binary);
+    std::uint8_t start[8];
+    if (!in.read(reinterpret_cast<char*>(start), sizeof start)) return;
+    if (start[0] != 0x76 || start[1] != 0x2f || start[2] != 0x31 || start[3] != 0x01) return;
+    const bool multiPart = (start[5] & 0x10) != 0;  // version flag bit 12
+    std::uint64_t offset = sizeof start;
+    // A name or type longer than 255 bytes is invalid; OpenEXR reports it.
+    const auto readName = [&](std::string& name) {
+        name.clear();
+        for (char c; in.get(c);) {
+            ++offset;
+            if (c == '\0') return true;
+            if (name.size() == 255) return false;
+            name.push_back(c);
+        }
+        return false;
+    };
+    std::string name, type;
+    for (bool headerStart = true;;) {
+        if (!readName(name)) return;
+        if (name.empty()) {
+            // An empty name ends a header; right at a header's start it ends a
+            // multi-part file's list of headers.
+            if (!multiPart || headerStart) return;
+            headerStart = true;
+            continue;
+        }
+        headerStart = false;
+        if (!readName(type)) return;
+        std::uint8_t size[4];
+        if (!in.read(reinterpret_cast<char*>(size), sizeof size)) return;
+        offset += sizeof size;
+        const std::int32_t claimed = static_cast<std::int32_t>(std::uint32_t(size[0]) | std::uint32_t(size[1]) << 8 |
+                                                               std::uint32_t(size[2]) << 16 |
+                                                               std::uint32_t(size[3]) << 24);
+        if (claimed < 0 || std::uint64_t(claimed) > fileSize - offset)
+            throw Error(ErrorCode::corrupt, concat(quoted(path), ": header attribute '", name, "' (", type, ") claims ",
+                                                   claimed, " bytes but the file has ", fileSize - offset,
+                                                   " bytes left"));
+        offset += std::uint64_t(claimed);
+        if (!in.seekg(static_cast<std::streamoff>(offset))) return;
+    }
+}
+
+/// Bounds OpenEXR's own allocations for every file it opens from now on: its
+/// header check refuses data windows and tiles larger than a map can be.
+void limitOpenExrAllocations() {
+    static const bool once = [] {
+        Imf::Header::setMaxImageSize(int(kMaxExrExtent), int(kMaxExrExtent));
+        Imf::Header::setMaxTileSize(int(kMaxExrExtent), int(kMaxExrExtent));
+        return true;
+    }();
+    (void)once;
+}
+
 /// The deep EXR being imported: header checks and bands of pixels.
 class DeepExrSource {
 public:
     explicit DeepExrSource(const std::string& path) : path_(path) {
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec))
-            throw Error(concat(quoted(path), ": cannot open: ", std::strerror(ENOENT)));
+        // stat, not open: opening a FIFO would wait for a writer forever.
+        struct stat st {};
+        if (::stat(path.c_str(), &st) != 0)
+            throw Error(ErrorCode::io, concat(quoted(path), ": cannot open: ", std::strerror(errno)));
+        if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, concat(quoted(path), ": not a regular file"));
+        checkExrHeaderSizes(path, static_cast<std::uint64_t>(st.st_size));
+        limitOpenExrAllocations();
         bool tiled = false, deep = false, multiPart = false;
         if (!Imf::isOpenExrFile(path.c_str(), tiled, deep, multiPart))
             throw Error(concat(quoted(path), ": not an OpenEXR file"));
@@ -871,6 +949,10 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
 
 ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
                               const ExrImportOptions& options) {
+    checkErrorBoundOption(options.maxLinearError, "deep EXR import: the linearisation error");
+    if (!std::isfinite(options.tolerance))
+        throw Error(ErrorCode::argument,
+                    concat("deep EXR import: the tolerance must be finite, got ", options.tolerance));
     try {
         DeepExrSource source(exrPath);
         const Imf::Header& h = source.header();
