@@ -29,6 +29,7 @@
 #include "dsm/map_info.h"
 #include "dsm/map_json.h"
 #include "dsm/reader.h"
+#include "option_checks.h"
 #include "tool_support.h"
 
 namespace {
@@ -68,7 +69,7 @@ bool guarded(const std::string& file, Action&& action) {
         action();
         return true;
     } catch (const std::exception& e) {
-        tools::reportError(kToolName, file, e.what());
+        tools::reportError(kToolName, file, tools::exceptionMessage(e));
     } catch (...) {
         tools::reportError(kToolName, file, "unknown error");
     }
@@ -87,7 +88,7 @@ void namingInput(const tools::InputFile& input, Action&& action) {
         for (std::size_t at = message.find(input.path()); at != std::string::npos;
              at = message.find(input.path(), at + input.name().size()))
             message.replace(at, input.path().size(), input.name());
-        throw dsm::Error(message);
+        throw dsm::Error(e.code(), message);
     }
 }
 
@@ -645,7 +646,8 @@ int main(int argc, char** argv) {
     auto* level = app.add_option("--level", levelValue,
                                  "Mip level for --pixel and the pictures (default 0); limits --tiles and --stats "
                                  "to that level")
-                      ->type_name("L");
+                      ->type_name("L")
+                      ->check(tools::integerIn(0, UINT32_MAX));
     auto* verifyFlag = app.add_flag("--verify", o.verify,
                                     "Check every tile of every file (CRC-32, layout, function invariants) and print "
                                     "'FILE: OK' or the error instead of describing the files");

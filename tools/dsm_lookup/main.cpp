@@ -36,6 +36,7 @@
 #include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
 #include "query_line.h"
+#include "option_checks.h"
 #include "tool_support.h"
 
 namespace {
@@ -51,12 +52,17 @@ constexpr double kMaxCacheMiB = 1024.0 * 1024.0;
 /// The widest map a reader accepts (ReaderOptions::maxWidth): a wider filter
 /// only costs time, and an unbounded one would make a lookup loop for ages.
 constexpr double kMaxFilterWidth = 131072.0;
+/// Depths and thresholds in light units: any finite scene fits well inside.
+constexpr double kMaxLength = 1e30;
 /// Light samples per soft query: a bound keeps one query's time finite
 /// (256 samples already put the estimate's noise below 1/32).
 constexpr int kMaxLightSamples = 65536;
 
 enum class Space { World, Light, Raster };
 enum class Format { Csv, Json };
+/// Where the complaint about a bad query goes (--errors): standard error, the
+/// answer stream (so a client reading one pipe sees everything), or nowhere.
+enum class ErrorReport { Stderr, Inline, Quiet };
 
 struct Options {
     std::string map;
@@ -72,6 +78,7 @@ struct Options {
     bool errorBound = false;
     bool strict = false;
     bool stats = false;
+    std::string errors = "stderr";
     double cacheMiB = kDefaultCacheMiB;
     // Soft shadows (--area-light); the rest apply only with it.
     std::string areaLight;  ///< empty: point lookups
@@ -208,13 +215,18 @@ enum class Details { None, Traced, Pcf };
 /// Prints one answer line per query, buffered; flush() hands them over.
 class AnswerWriter {
 public:
-    AnswerWriter(Format format, int channels, bool errorBound, Details details = Details::None)
-        : format_(format), channels_(channels), errorBound_(errorBound), details_(details) {}
+    /// `errorColumn`: CSV rows end in an error column (--errors inline),
+    /// empty for an answer.
+    AnswerWriter(Format format, int channels, bool errorBound, Details details = Details::None,
+                 bool errorColumn = false)
+        : format_(format), channels_(channels), errorBound_(errorBound), details_(details),
+          errorColumn_(errorColumn && format == Format::Csv) {}
 
     void header() {
         if (format_ != Format::Csv) return;
         text_ += channels_ == 3 ? "r,g,b" : "v";
         if (errorBound_) text_ += ",error_bound";
+        if (errorColumn_) text_ += ",error";
         text_ += '\n';
     }
 
@@ -224,6 +236,7 @@ public:
             text_ += number(a.v[0]);
             if (channels_ == 3) text_ += "," + number(a.v[1]) + "," + number(a.v[2]);
             if (errorBound_) text_ += "," + number(a.errorBound);
+            if (errorColumn_) text_ += ',';
         } else {
             text_ += "{\"" + std::string(key) + "\":" + std::to_string(index);
             if (channels_ == 3)
@@ -243,11 +256,14 @@ public:
     }
 
     /// The placeholder that keeps answers aligned with queries: nan in every
-    /// CSV column, or {"line":N,"error":"..."} (`key` as for answer()).
+    /// CSV column (and "<key> N: problem" in the error column), or
+    /// {"line":N,"error":"..."} (`key` as for answer()).
     void bad(const char* key, std::uint64_t index, const std::string& problem) {
         if (format_ == Format::Csv) {
             const int columns = (channels_ == 3 ? 3 : 1) + (errorBound_ ? 1 : 0);
             for (int c = 0; c < columns; ++c) text_ += c ? ",nan" : "nan";
+            if (errorColumn_) text_ += "," + csvQuoted(oneLine(std::string(key) + " " + std::to_string(index) + ": " +
+                                                               problem));
         } else {
             const nlohmann::json message = problem;
             text_ += "{\"" + std::string(key) + "\":" + std::to_string(index) + ",\"error\":" +
@@ -267,10 +283,18 @@ public:
     }
 
 private:
+    /// A CSV field in double quotes, inner quotes doubled.
+    static std::string csvQuoted(const std::string& text) {
+        std::string out = "\"";
+        for (char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+        return out + '"';
+    }
+
     Format format_;
     int channels_;
     bool errorBound_;
     Details details_;
+    bool errorColumn_;
     std::string text_;
 };
 
@@ -315,9 +339,8 @@ public:
                 ++totals.bad;
                 writer_.bad("point", k + 1, *problem);
                 if (!writer_.flush()) return Stop::OutputError;
-                std::cerr << oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(k + 1) + ": " +
-                                     *problem)
-                          << '\n';
+                complain(oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(k + 1) + ": " +
+                                 *problem));
                 if (options_.strict) return Stop::Strict;
             }
         }
@@ -351,7 +374,7 @@ public:
             // The answer line goes out before the complaint, so a reader of
             // both streams sees them in order.
             if (!writer_.flush()) return Stop::OutputError;
-            std::cerr << lineError(inputName, lineNumber, *problem) << '\n';
+            complain(lineError(inputName, lineNumber, *problem));
             if (options_.strict) return Stop::Strict;
         }
         return writer_.flush() ? Stop::None : Stop::OutputError;
@@ -360,6 +383,12 @@ public:
     Totals totals;
 
 private:
+    /// A bad query's error line, on standard error with --errors stderr only
+    /// (inline put it in the answer already; quiet drops it).
+    void complain(const std::string& line) const {
+        if (options_.errors == "stderr") std::cerr << line << '\n';
+    }
+
     const Options& options_;
     std::string mapPath_;
     QueryMode& mode_;
@@ -433,7 +462,6 @@ void checkSoftOptions(const CLI::App& app, const Options& o) {
     if (o.soft == "pcf")
         for (const char* name : {"--light-samples", "--layers", "--seed"})
             if (given(name)) throw UsageError(std::string(name) + " does not apply to --soft pcf");
-    if (!std::isfinite(o.zThreshold)) throw UsageError("--z-threshold: expected a finite number");
 }
 
 int run(const Options& o, const std::vector<std::array<double, 3>>& points, int level) {
@@ -451,14 +479,20 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         readerOptions.cache = dsm::TileCache::create(static_cast<std::size_t>(o.cacheMiB * 1024.0 * 1024.0));
         map = dsm::DeepShadowMap::open(mapFile->path(), readerOptions);
     } catch (const std::exception& e) {
-        if (!mapFile) reportError(kToolName, o.map, e.what());
-        else reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+        if (!mapFile) reportError(kToolName, o.map == "-" ? "<stdin>" : o.map, exceptionMessage(e));
+        else reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
         return kExitFailure;
     }
     if (!o.input.empty() && o.input != "-") {
         std::error_code ignored;
         if (std::filesystem::is_directory(o.input, ignored)) {
             reportError(kToolName, o.input, "is a directory");
+            return kExitFailure;
+        }
+        try {
+            requireRegularFile(o.input);  // a FIFO would block the open; standard input is "-"
+        } catch (const dsm::Error& e) {
+            reportError(kToolName, o.input, e.what());
             return kExitFailure;
         }
         inputFile.open(o.input, std::ios::binary);
@@ -487,7 +521,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
             const dsm::AreaLight light = dsm::AreaLight::forMap(map->info(), size);
             tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
         } catch (const std::exception& e) {
-            reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+            reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
             return kExitFailure;
         }
         dsm::SoftShadowOptions shadow;
@@ -503,7 +537,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         mode = std::move(query);
     }
     AnswerWriter writer(o.format == "json" ? Format::Json : Format::Csv, map->info().channels, o.errorBound,
-                        details);
+                        details, /*errorColumn=*/o.errors == "inline");
     Session session(o, map->path(), *mode, writer);
 
     const auto start = std::chrono::steady_clock::now();
@@ -515,7 +549,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
             stop = session.lines(queriesFromStdin ? *std::cin.rdbuf() : *inputFile.rdbuf(), inputName);
     } catch (const std::exception& e) {
         writer.flush();
-        reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+        reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
         stop = Stop::MapError;
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -554,7 +588,7 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"world", "light", "raster"}))
         ->capture_default_str();
     app.add_option("-w,--filter-width", o.filterWidth, "Filter width in level-0 pixels")
-        ->check(CLI::NonNegativeNumber)
+        ->check(finiteNumberIn(0.0, kMaxFilterWidth))
         ->capture_default_str();
     app.add_option("-f,--filter", o.filter, "Lookup filter")
         ->check(CLI::IsMember({"box", "triangle", "gaussian"}))
@@ -572,9 +606,15 @@ int main(int argc, char** argv) {
     app.add_flag("--header", o.header, "Print a CSV header line first (csv only)");
     app.add_flag("-e,--error-bound", o.errorBound, "Add each answer's compression error bound");
     app.add_flag("--strict", o.strict, "Stop at the first bad line (exit status 1)");
+    app.add_option("--errors", o.errors,
+                   "Where bad queries are reported: stderr (one line each), inline (in the answer stream: CSV rows "
+                   "gain an error column, JSON answers carry \"error\"; nothing on standard error) or quiet "
+                   "(only the placeholder answer)")
+        ->check(CLI::IsMember({"stderr", "inline", "quiet"}))
+        ->capture_default_str();
     app.add_flag("--stats", o.stats, "Print throughput and tile-cache statistics to standard error at the end");
     app.add_option("--cache-mb", o.cacheMiB, "Tile cache budget in MiB")
-        ->check(CLI::NonNegativeNumber)
+        ->check(finiteNumberIn(0.0, kMaxCacheMiB))
         ->type_name("MIB")
         ->capture_default_str();
     app.add_option("--area-light", o.areaLight,
@@ -586,20 +626,15 @@ int main(int argc, char** argv) {
         ->type_name("N")
         ->capture_default_str();
     app.add_option("--layers", o.layers, "Map layers a soft query uses (0 = all)")
-        ->check(CLI::NonNegativeNumber)
+        ->check(integerIn(0, 255))
         ->type_name("K")
         ->capture_default_str();
     app.add_option("--z-threshold", o.zThreshold, "Depth tolerance of a ray hitting a stored sample (light units)")
-        ->check(CLI::NonNegativeNumber)
+        ->check(finiteNumberIn(0.0, kMaxLength))
         ->type_name("Z")
         ->capture_default_str();
     app.add_option("--seed", o.seed, "Seed of the light samples (a non-negative integer)")
-        ->check(CLI::Validator(
-            // CLI11 would wrap "-1" around to a huge unsigned number.
-            [](std::string& text) {
-                return text.find('-') == std::string::npos ? std::string() : "expects a non-negative integer";
-            },
-            "NONNEGATIVE", "non-negative"))
+        ->check(integerIn(0, UINT64_MAX))
         ->capture_default_str();
     app.add_option("--soft", o.soft, "Soft-shadow method: mtsm (ray tracing the map) or pcf (the PCF baseline)")
         ->check(CLI::IsMember({"mtsm", "pcf"}))
@@ -615,9 +650,6 @@ int main(int argc, char** argv) {
     std::vector<std::array<double, 3>> points;
     try {
         if (!std::isfinite(o.bias)) throw UsageError("--bias: expected a finite number");
-        if (!(o.filterWidth <= kMaxFilterWidth))
-            throw UsageError("--filter-width: at most " + number(kMaxFilterWidth) + " pixels");
-        if (o.cacheMiB > kMaxCacheMiB) throw UsageError("--cache-mb: at most " + number(kMaxCacheMiB) + " MiB");
         if (o.header && o.format != "csv") throw UsageError("--header applies to --format csv only");
         level = levelFromText(o.level);
         for (const std::string& p : o.points) points.push_back(parsePointArgument(p));
@@ -634,7 +666,7 @@ int main(int argc, char** argv) {
         return kExitUsage;
     } catch (const std::exception& e) {
         std::cout.flush();
-        std::cerr << oneLine(std::string(kToolName) + ": ERROR: " + e.what()) << '\n';
+        std::cerr << oneLine(std::string(kToolName) + ": ERROR: " + exceptionMessage(e)) << '\n';
         return kExitFailure;
     }
 }
