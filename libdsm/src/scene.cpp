@@ -856,18 +856,22 @@ json parseJson(const Parser& p, const std::string& text) {
     struct Level {
         bool isArray = false;
         std::size_t index = 0;  // arrays: the element being read
-        std::string key;        // objects: the last key read
+        std::string key;        // objects: the key whose value is being read
+        bool inMember = false;  // objects: between a key and the end of its value
         std::set<std::string> keys;
     };
     std::vector<Level> levels;
     auto pointer = [&] {
         std::string out;
         for (const Level& level : levels)
-            out += "/" + (level.isArray ? std::to_string(level.index) : pointerToken(level.key));
+            if (level.isArray) out += "/" + std::to_string(level.index);
+            else if (level.inMember) out += "/" + pointerToken(level.key);
         return out;
     };
     auto elementDone = [&] {
-        if (!levels.empty() && levels.back().isArray) ++levels.back().index;
+        if (levels.empty()) return;
+        if (levels.back().isArray) ++levels.back().index;
+        else levels.back().inMember = false;
     };
     const json::parser_callback_t callback = [&](int, json::parse_event_t event, json& parsed) {
         switch (event) {
@@ -876,7 +880,7 @@ json parseJson(const Parser& p, const std::string& text) {
                 if (levels.size() >= kMaxSceneNesting)
                     p.fail(pointer(), detail::concat("nested deeper than ", kMaxSceneNesting, " levels"),
                            ErrorCode::limit);
-                levels.push_back({event == json::parse_event_t::array_start, 0, {}, {}});
+                levels.push_back({event == json::parse_event_t::array_start, 0, {}, false, {}});
                 break;
             case json::parse_event_t::object_end:
             case json::parse_event_t::array_end:
@@ -887,6 +891,7 @@ json parseJson(const Parser& p, const std::string& text) {
                 if (!levels.empty()) {
                     Level& level = levels.back();
                     level.key = parsed.get<std::string>();
+                    level.inMember = true;
                     if (!level.keys.insert(level.key).second)
                         p.fail(pointer(), "key \"" + detail::clip(level.key) + "\" appears twice in one object");
                 }

@@ -201,7 +201,7 @@ elseif(CHECK STREQUAL "json_error")
   file(WRITE "${bad}" "{\"light\": {\"type\": \"spot\",,}}\n")
   run("${bad}" -o "${MAP}")
   expect_rc(1)
-  expect_one_error_line("dsm-build: ERROR scene '${bad}': invalid JSON: ")
+  expect_one_error_line("dsm-build: ERROR scene '${bad}': /light: invalid JSON: ")
   expect_contains(ERR "line 1, column")
   expect_no_file("${MAP}")
   # An existing file is left alone by a failed build.

@@ -166,6 +166,10 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_flag("-q,--quiet", quiet, "No progress or summary");
     app.add_option("--stats-json", statsJson, "Write the build statistics as JSON to this file");
+    std::uint64_t maxSceneMiB = dsm::SceneReadOptions{}.maxBytes >> 20;
+    app.add_option("--max-scene-mb", maxSceneMiB, "Largest scene read, in MiB, 1..1048576")
+        ->check(integerIn(1, 1u << 20))
+        ->capture_default_str();
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
@@ -235,14 +239,10 @@ int main(int argc, char** argv) {
             if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
         }
         if (scenePath != "-") dsm::tools::requireRegularFile(scenePath);  // a FIFO would block the open
-        dsm::Scene scene;
-        if (scenePath == "-") {
-            std::stringstream text;
-            text << std::cin.rdbuf();
-            scene = dsm::parseScene(text.str(), ".", "<stdin>");
-        } else {
-            scene = dsm::loadScene(scenePath);
-        }
+        dsm::SceneReadOptions sceneOptions;
+        sceneOptions.maxBytes = maxSceneMiB << 20;
+        const dsm::Scene scene = scenePath == "-" ? dsm::readScene(std::cin, ".", "<stdin>", sceneOptions)
+                                                  : dsm::loadScene(scenePath, sceneOptions);
         options.threads = dsm::tools::usableThreadsNoted("dsm-build", options.threads, quiet);
         if (!quiet) announceLargeBuild(dsm::estimateBuild(scene, options), options.samplesPerPixel);
         Progress progress(quiet);
