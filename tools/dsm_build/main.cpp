@@ -35,8 +35,8 @@ std::array<std::uint32_t, 4> parseRegion(const std::string& text) {
         if (end == std::string::npos ||
             !dsm::tools::parseUnsigned(std::string_view(text).substr(start, end - start), value) ||
             value > UINT32_MAX)
-            throw std::invalid_argument("--region expects X0,Y0,X1,Y1 (integers in [0, 4294967295]), got '" +
-                                        text + "'");
+            throw std::invalid_argument("--region expects X0,Y0,X1,Y1, got '" + text +
+                                        "' (four integers in [0, 4294967295])");
         r[k] = static_cast<std::uint32_t>(value);
         start = end + 1;
     }

@@ -704,7 +704,7 @@ int main(int argc, char** argv) {
         else if (o.picture != Picture::None) status = writePicture(o);
         else status = describe(o);
     } catch (const std::exception& e) {
-        std::cerr << tools::errorLine(kToolName, "", e.what()) << '\n';
+        std::cerr << tools::errorLine(kToolName, "", tools::exceptionMessage(e)) << '\n';
         return tools::kExitFailure;
     }
     std::cout.flush();
