@@ -20,9 +20,6 @@
 #include <memory>
 #include <numbers>
 
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <ImathBox.h>
 #include <ImathMatrix.h>
 #include <ImathVec.h>
@@ -46,9 +43,12 @@
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
 
+#include <sys/stat.h>
+
 #include "dsm/compressor.h"
 #include "dsm/error.h"
 #include "dsm/map_json.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/writer.h"
 #include "text.h"
@@ -509,36 +509,18 @@ void checkErrorBoundOption(double value, const char* what) {
                                                 ", 1] (float32 samples cannot keep a tighter bound)"));
 }
 
-/// A temporary file beside `path`, removed unless commit() renamed it.
-class TemporaryFile {
-public:
-    explicit TemporaryFile(const std::string& path) : path_(path) {
-        const std::filesystem::path target(path);
-        std::string name = (target.parent_path() / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
-        if (target.parent_path().empty()) name = "." + target.filename().string() + ".tmp-XXXXXX";
-        const int fd = ::mkstemp(name.data());
-        if (fd < 0) throw Error(concat(quoted(path), ": cannot create a temporary file: ", std::strerror(errno)));
-        ::fchmod(fd, 0644);  // mkstemp creates 0600; an image is meant to be shared
-        ::close(fd);
-        temporary_ = name;
+/// Re-reads the offset tables of the EXR OpenEXR just wrote: every chunk must
+/// be there before the file may replace the target.
+void verifyWrittenExr(const OutputFile& file) {
+    bool complete = false;
+    try {
+        Imf::MultiPartInputFile written(file.temporaryPath().c_str());
+        complete = written.parts() == 1 && written.partComplete(0);
+    } catch (const std::exception& e) {
+        throw Error(ErrorCode::io, concat(quoted(file.path()), ": the written image does not read back: ", e.what()));
     }
-    ~TemporaryFile() {
-        if (!committed_) std::remove(temporary_.c_str());
-    }
-    TemporaryFile(const TemporaryFile&) = delete;
-    TemporaryFile& operator=(const TemporaryFile&) = delete;
-    const std::string& path() const { return temporary_; }
-    void commit() {
-        if (std::rename(temporary_.c_str(), path_.c_str()) != 0)
-            throw Error(concat(quoted(path_), ": cannot rename the finished file into place: ", std::strerror(errno)));
-        committed_ = true;
-    }
-
-private:
-    std::string path_;
-    std::string temporary_;
-    bool committed_ = false;
-};
+    if (!complete) throw Error(ErrorCode::io, concat(quoted(file.path()), ": the written image is incomplete"));
+}
 
 /// Per-pixel sample lists of a band of rows and the frame buffer that points
 /// OpenEXR at them. Rows [y0, y0 + rows) of columns [x0, x0 + width), in the
@@ -605,6 +587,8 @@ struct Band {
 ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
                               const ExrExportOptions& options) {
     checkErrorBoundOption(options.maxDeviation, "deep EXR export: the largest deviation");
+    checkOutputPath(exrPath);
+    refuseOutputOverInputs(exrPath, {dsmPath});
     const auto map = DeepShadowMap::open(dsmPath);
     const MapInfo& info = map->info();
     if (options.level >= info.levels.size())
@@ -659,7 +643,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     header.insert("dsm:filterWidth", Imf::DoubleAttribute(info.filterWidth));
     header.insert("dsm:metadata", Imf::StringAttribute(info.metadata));
 
-    TemporaryFile temporary(exrPath);
+    OutputFile output(exrPath);
     std::vector<double> largest(std::size_t(height), 0.0);
     std::vector<std::uint64_t> oneStep(std::size_t(height), 0);
     auto fill = [&](Band& band) {
@@ -690,7 +674,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
             const int tile = int(options.tileSize);
             header.setTileDescription(Imf::TileDescription(unsigned(tile), unsigned(tile), Imf::ONE_LEVEL));
             header.setType(Imf::DEEPTILE);
-            Imf::DeepTiledOutputFile out(temporary.path().c_str(), header);
+            Imf::DeepTiledOutputFile out(output.temporaryPath().c_str(), header);
             for (int ty = 0; ty * tile < height; ++ty) {
                 band.reset(0, ty * tile, width, std::min(tile, height - ty * tile));
                 fill(band);
@@ -699,7 +683,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
             }
         } else {
             header.setType(Imf::DEEPSCANLINE);
-            Imf::DeepScanLineOutputFile out(temporary.path().c_str(), header);
+            Imf::DeepScanLineOutputFile out(output.temporaryPath().c_str(), header);
             constexpr int kRows = 16;
             for (int y = 0; y < height; y += kRows) {
                 band.reset(0, y, width, std::min(kRows, height - y));
@@ -711,9 +695,15 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     } catch (const Error&) {
         throw;
     } catch (const std::exception& e) {
-        throw Error(concat(quoted(exrPath), ": ", e.what()));
+        // OpenEXR names the temporary file it was writing: name the output instead.
+        std::string what = e.what();
+        for (auto at = what.find(output.temporaryPath()); at != std::string::npos;
+             at = what.find(output.temporaryPath(), at + exrPath.size()))
+            what.replace(at, output.temporaryPath().size(), exrPath);
+        throw Error(ErrorCode::io, concat(quoted(exrPath), ": ", what));
     }
-    temporary.commit();
+    verifyWrittenExr(output);
+    output.commit();
     for (double v : largest) report.largestDeviation = std::max(report.largestDeviation, v);
     for (std::uint64_t n : oneStep) report.oneStepExcess += n;
     return report;
@@ -953,6 +943,8 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
     if (!std::isfinite(options.tolerance))
         throw Error(ErrorCode::argument,
                     concat("deep EXR import: the tolerance must be finite, got ", options.tolerance));
+    checkOutputPath(dsmPath);
+    refuseOutputOverInputs(dsmPath, {exrPath});
     try {
         DeepExrSource source(exrPath);
         const Imf::Header& h = source.header();

@@ -17,6 +17,7 @@
 #include "dsm/compressor.h"
 #include "dsm/error.h"
 #include "dsm/map_json.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/threads.h"
 #include "dsm/writer.h"
@@ -68,7 +69,6 @@ struct TileStats {
 
 }  // namespace
 
-BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
 BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     BuildEstimate e;
     e.width = options.width ? options.width : scene.light.width;
@@ -96,12 +96,14 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     return e;
 }
 
+BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
     const auto wallStart = Clock::now();
     LightDescription light = scene.light;
     if (options.width) light.width = options.width;
     if (options.height) light.height = options.height;
     const std::uint32_t W = light.width, H = light.height;
     const std::string where = concat("build '", path, "'");
+    checkOutputPath(path);  // before the work, not after it
     if (W == 0 || H == 0) throw Error(concat(where, ": resolution ", W, "x", H, " is empty"));
     if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
         throw Error(concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));

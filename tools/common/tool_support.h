@@ -14,8 +14,11 @@
 #include <string_view>
 #include <system_error>
 #include <unistd.h>
+#include <vector>
 
 #include <CLI/CLI.hpp>
+
+#include "dsm/output_file.h"
 
 #include "input_file.h"
 
@@ -89,6 +92,20 @@ inline int parseArguments(CLI::App& app, int argc, char** argv) {
         return app.exit(e) == 0 ? kExitOk : kExitUsage;
     }
     return -1;
+}
+
+/// Refuses, before any work, outputs that cannot be written or would destroy
+/// an input: every output is checked (dsm::checkOutputPath), no output is the
+/// same file as an input ("-" stands for the file standard input comes from)
+/// and no two outputs are the same file. Throws dsm::Error naming the output.
+inline void checkOutputs(const std::vector<std::string>& outputs, const std::vector<std::string>& inputs) {
+    std::vector<std::string> files;
+    for (const std::string& input : inputs) files.push_back(input == "-" ? "/dev/stdin" : input);
+    for (const std::string& output : outputs) {
+        dsm::checkOutputPath(output);
+        dsm::refuseOutputOverInputs(output, files);
+    }
+    dsm::refuseSharedOutputs(outputs);
 }
 
 }  // namespace dsm::tools

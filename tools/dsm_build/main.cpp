@@ -222,27 +222,22 @@ int main(int argc, char** argv) {
         return 2;
     }
 
-    // Fail before the build, not after it, when the statistics cannot be
-    // written; and leave no statistics file behind when the build fails.
-    bool statsDone = false;
-    struct RemoveUnlessDone {
-        const std::string& path;
-        const bool& done;
-        ~RemoveUnlessDone() {
-            if (!path.empty() && !done) std::remove(path.c_str());
-        }
-    } statsGuard{statsJson, statsDone};
     try {
-        std::ofstream statsOut;
-        if (!statsJson.empty()) {
-            statsOut.open(statsJson);
-            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
-        }
+        // Before the scene is read or the build starts: outputs that cannot be
+        // written, or would replace the scene or each other, are refused.
+        std::vector<std::string> outputs{output};
+        if (app.count("--stats-json")) outputs.push_back(statsJson);
+        dsm::tools::checkOutputs(outputs, {scenePath});
         if (scenePath != "-") dsm::tools::requireRegularFile(scenePath);  // a FIFO would block the open
         dsm::SceneReadOptions sceneOptions;
         sceneOptions.maxBytes = maxSceneMiB << 20;
         const dsm::Scene scene = scenePath == "-" ? dsm::readScene(std::cin, ".", "<stdin>", sceneOptions)
                                                   : dsm::loadScene(scenePath, sceneOptions);
+        std::vector<std::string> volumeFiles;
+        for (const dsm::SceneObject& object : scene.objects)
+            if (const auto* volume = std::get_if<dsm::Volume>(&object.geometry))
+                if (const auto* vdb = std::get_if<dsm::VdbDensity>(&volume->density)) volumeFiles.push_back(vdb->file);
+        dsm::tools::checkOutputs(outputs, volumeFiles);
         options.threads = dsm::tools::usableThreadsNoted("dsm-build", options.threads, quiet);
         if (!quiet) announceLargeBuild(dsm::estimateBuild(scene, options), options.samplesPerPixel);
         Progress progress(quiet);
@@ -268,7 +263,7 @@ int main(int argc, char** argv) {
                         s.fileBytes ? double(s.rawBytes) / double(s.fileBytes) : 0.0,
                         humanBytes(double(s.rawBytes)).c_str());
         }
-        if (!statsJson.empty()) {
+        if (app.count("--stats-json")) {
             nlohmann::json j = {{"output", output},
                                 {"wall_seconds", s.wallSeconds},
                                 {"sampling_seconds", s.samplingSeconds},
@@ -284,10 +279,10 @@ int main(int argc, char** argv) {
                                 {"file_bytes", s.fileBytes},
                                 {"raw_bytes", s.rawBytes},
                                 {"sample_vertices", s.sampleVertices}};
-            statsOut << j.dump(2) << "\n";
-            statsOut.flush();
-            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
-            statsDone = true;
+            const std::string text = j.dump(2) + "\n";
+            dsm::OutputFile stats(statsJson);
+            stats.write(text.data(), text.size());
+            stats.commit();
         }
     } catch (const dsm::Error& e) {
         std::cerr << "dsm-build: ERROR " << e.what() << "\n";

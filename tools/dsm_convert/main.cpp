@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
@@ -136,6 +137,9 @@ int main(int argc, char** argv) {
 
     std::string inputName = input == "-" ? "<stdin>" : input, inputPath = input, current = input;
     try {
+        // Before any work: an output that cannot be written or would replace an input is refused.
+        dsm::tools::checkOutputs({output}, cameraFrom.empty() ? std::vector<std::string>{input}
+                                                              : std::vector<std::string>{input, cameraFrom});
         dsm::tools::InputFile in(input);
         inputName = in.name();
         inputPath = in.path();

@@ -28,6 +28,7 @@
 #include "dsm/map_images.h"
 #include "dsm/map_info.h"
 #include "dsm/map_json.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "option_checks.h"
 #include "tool_support.h"
@@ -576,6 +577,10 @@ int verify(const Options& o) {
             namingInput(input, [&] { dsm::validate(input.path()); });
             std::cout << input.name() << ": OK\n";
         });
+        if (argument != "-")
+            for (const std::string& stale : dsm::staleTemporaries(argument))
+                std::cout << name << ": note: '" << stale
+                          << "' is a temporary file left by an interrupted write over a day ago; it may be deleted\n";
     }
     return allOk ? tools::kExitOk : tools::kExitFailure;
 }
@@ -585,7 +590,11 @@ int writePicture(const Options& o) {
     const std::string& argument = o.files.front();
     const std::string name = argument == "-" ? "<stdin>" : argument;
     bool keepsFloats = false;
-    if (!guarded(o.output, [&] { keepsFloats = dsm::imageFormatKeepsFloats(o.output); })) return tools::kExitFailure;
+    const bool writable = guarded(o.output, [&] {
+        tools::checkOutputs({o.output}, {argument});  // before the picture is computed
+        keepsFloats = dsm::imageFormatKeepsFloats(o.output);
+    });
+    if (!writable) return tools::kExitFailure;
 
     const unsigned level = o.level.value_or(0);
     dsm::FloatImage image;
