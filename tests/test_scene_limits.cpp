@@ -59,7 +59,8 @@ void expectSceneError(const std::string& json, const std::string& wanted,
                       dsm::ErrorCode code = dsm::ErrorCode::scene) {
     const dsm::Error e = parseError(json);
     EXPECT_EQ(e.code(), code) << e.what();
-    EXPECT_NE(std::string(e.what()).find(wanted), std::string::npos) << "message: " << e.what() << "\nwanted: " << wanted;
+    EXPECT_NE(std::string(e.what()).find(wanted), std::string::npos)
+        << "message: " << e.what() << "\nwanted: " << wanted;
     expectOneShortLine(e);
 }
 
@@ -171,17 +172,20 @@ TEST(SceneLimits, LightFarAwayIsRefusedForWhatItIs) {
 
 TEST(SceneLimits, OtherNumbersHaveRanges) {
     const std::string box = R"("bounds": [[0, 0, 0], [1, 1, 1]])";
-    expectSceneError(sceneText(R"({"type": "volume", )" + box + R"(, "density": {"type": "noise", "frequency": 1e300}})"),
-                     "/objects/0/density/frequency: expected a number in [1e-12, 1000000]");
-    expectSceneError(sceneText(R"({"type": "volume", )" + box + R"(, "density": {"type": "homogeneous", "value": 1e300}})"),
-                     "/objects/0/density/value: expected a number in [0, 1e+12]");
+    expectSceneError(
+        sceneText(R"({"type": "volume", )" + box + R"(, "density": {"type": "noise", "frequency": 1e300}})"),
+        "/objects/0/density/frequency: expected a number in [1e-12, 1000000]");
+    expectSceneError(
+        sceneText(R"({"type": "volume", )" + box + R"(, "density": {"type": "homogeneous", "value": 1e300}})"),
+        "/objects/0/density/value: expected a number in [0, 1e+12]");
     expectSceneError(sceneText(R"({"type": "volume", )" + box + R"(, "scale": 1e300,
                                    "density": {"type": "homogeneous", "value": 1}})"),
                      "/objects/0/scale: expected a number in [0, 1e+12]");
     expectSceneError(sceneText(R"({"type": "sphere", "radius": 1, "motion": [0, -1e200, 0]})"),
                      "/objects/0/motion: expected [x, y, z] (3 numbers in [-1e+12, 1e+12])");
-    expectSceneError(sceneText(R"({"type": "mesh", "positions": [[0,0,0], [1,0,0], [0,1e39,0]], "triangles": [[0,1,2]]})"),
-                     "/objects/0/positions/2: expected [x, y, z] (3 numbers in [-1e+12, 1e+12])");
+    expectSceneError(
+        sceneText(R"({"type": "mesh", "positions": [[0,0,0], [1,0,0], [0,1e39,0]], "triangles": [[0,1,2]]})"),
+        "/objects/0/positions/2: expected [x, y, z] (3 numbers in [-1e+12, 1e+12])");
     expectSceneError(sceneText(R"({"type": "quad", "u": [1e-300, 0, 0], "v": [0, 1, 0]})"),
                      "/objects/0/u: expected a non-zero vector");
     expectSceneError(sceneText(R"({"type": "sphere", "radius": 1e-300})"),
@@ -287,6 +291,17 @@ TEST(SceneLimits, LongUserTextIsCutInMessages) {
     const dsm::Error newline = parseError(sceneText(R"({"type": "sphere", "radius": 1, "a\nb": 1})"));
     EXPECT_NE(std::string(newline.what()).find("unknown key \"a\\nb\""), std::string::npos) << newline.what();
     expectOneShortLine(newline);
+
+    // A pointer through many levels of long keys.
+    std::string deep;
+    for (int i = 0; i < 60; ++i) deep += "{\"" + std::string(100, 'a' + i % 26) + "\": ";
+    const dsm::Error pointer =
+        parseError(R"({"_comment": )" + deep + "1e400" + std::string(60, '}') + R"(, "light": )" + kLight + "}");
+    EXPECT_NE(std::string(pointer.what()).find("scene 'test.json': /_comment/aaaa"), std::string::npos)
+        << pointer.what();
+    EXPECT_NE(std::string(pointer.what()).find("...: invalid JSON: number overflow"), std::string::npos)
+        << pointer.what();
+    expectOneShortLine(pointer);
 
     // A long token in a syntax error.
     const dsm::Error syntax = parseError(sceneText(R"({"type": "sphere", "radius": )" + std::string(1'000'000, 't')));

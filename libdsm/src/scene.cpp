@@ -195,8 +195,12 @@ public:
 
     [[noreturn]] void fail(const std::string& path, const std::string& message,
                            ErrorCode code = ErrorCode::scene) const {
-        throw Error(code, detail::concat("scene '", detail::clip(name_, detail::kMaxQuotedPath),
-                                         "': ", path.empty() ? std::string() : path + ": ", message));
+        // A pointer through 64 levels of long keys could still be long: it
+        // is cut like any other quoted text.
+        throw Error(code, detail::concat(
+                              "scene '", detail::clip(name_, detail::kMaxQuotedPath),
+                              "': ", path.empty() ? std::string() : detail::clip(path, detail::kMaxQuotedPath) + ": ",
+                              message));
     }
     [[noreturn]] void expected(const std::string& path, const std::string& what, const json& got) const {
         fail(path, "expected " + what + ", got " + describe(got));
