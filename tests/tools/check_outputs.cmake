@@ -272,7 +272,8 @@ elseif(CHECK STREQUAL "full_disk")
     set(limit "")
     message(STATUS "full disk: a 2 MiB tmpfs filled up")
   else()
-    set(limit sh -c "trap '' XFSZ; ulimit -f 0; exec \"$@\"" sh)
+    # Lines, not ';': the command is kept in a CMake list.
+    set(limit sh -c "trap '' XFSZ\nulimit -f 0\nexec \"$@\"" sh)
     message(STATUS "full disk: mount not permitted; RLIMIT_FSIZE 0 instead")
   endif()
   # The previous good outputs, made while there is room.
