@@ -8,7 +8,10 @@
 #include <cstdint>
 #include <fstream>
 #include <limits>
+#include <filesystem>
+#include <sstream>
 #include <string>
+#include <vector>
 
 #include <sys/stat.h>
 
@@ -27,6 +30,14 @@ ErrorCode codeOf(Action&& action) {
     }
     ADD_FAILURE() << "no dsm::Error thrown";
     return ErrorCode::internal;
+}
+
+/// The arguments streamed into one string.
+template <class... Parts>
+std::string concatForTest(const Parts&... parts) {
+    std::ostringstream out;
+    (out << ... << parts);
+    return out.str();
 }
 
 void appendLittleEndian(std::string& bytes, std::uint32_t value) {
@@ -84,6 +95,128 @@ TEST(ExrHeader, AnAttributeLargerThanTheFileIsCorrupt) {
             << e.what();
     }
     EXPECT_FALSE(std::filesystem::exists(dir / "out.dsm"));
+}
+
+/// The message importing a deep EXR made of `attributes` (one header, or
+/// several for a multi-part file) throws; fails the test unless it is
+/// ErrorCode::corrupt and no map was written.
+std::string corruptHeaderMessage(const std::vector<std::string>& headers) {
+    test::TempDir dir;
+    const std::string exr = (dir / "header.exr").string();
+    std::string bytes = "\x76\x2f\x31\x01";
+    appendLittleEndian(bytes, headers.size() > 1 ? 2 | 0x800 | 0x1000 : 2 | 0x800);  // deep, multi-part
+    for (const std::string& header : headers) bytes += header + '\0';
+    if (headers.size() > 1) bytes += '\0';
+    bytes.resize(bytes.size() + 4096, '\0');
+    std::ofstream(exr, std::ios::binary) << bytes;
+    std::string message;
+    try {
+        importDeepExr(exr, (dir / "out.dsm").string());
+        ADD_FAILURE() << "no dsm::Error thrown";
+    } catch (const Error& e) {
+        EXPECT_EQ(e.code(), ErrorCode::corrupt) << e.what();
+        message = e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / "out.dsm"));
+    return message;
+}
+
+std::string attribute(const std::string& name, const std::string& type, const std::string& value,
+                      std::uint32_t claimedSize) {
+    std::string bytes;
+    appendAttribute(bytes, name, type, value, claimedSize);
+    return bytes;
+}
+
+std::string attribute(const std::string& name, const std::string& type, const std::string& value) {
+    return attribute(name, type, value, std::uint32_t(value.size()));
+}
+
+/// One channel list entry: name\0, pixel type, pLinear + 3 pad bytes, sampling.
+std::string channel(const std::string& name) {
+    std::string bytes = name + '\0';
+    appendLittleEndian(bytes, 2);
+    appendLittleEndian(bytes, 0);
+    appendLittleEndian(bytes, 1);
+    appendLittleEndian(bytes, 1);
+    return bytes;
+}
+
+const std::string kType = attribute("type", "string", "deepscanline");
+
+// OpenEXR reads a channel list up to its empty name whatever size the file
+// records; a list that disagrees would leave the rest of the header read out
+// of step with the size check.
+TEST(ExrHeader, AChannelListDisagreeingWithItsSizeIsCorrupt) {
+    const std::string list = channel("A") + channel("Z") + '\0';  // 37 bytes
+    const std::string longer = corruptHeaderMessage({kType + attribute("channels", "chlist", list, 20)});
+    EXPECT_NE(longer.find("header attribute 'channels' (chlist) records 20 bytes but its channel list does not end"),
+              std::string::npos)
+        << longer;
+    const std::string shorter =
+        corruptHeaderMessage({kType + attribute("channels", "chlist", list + std::string(8, 'x'))});
+    EXPECT_NE(shorter.find("header attribute 'channels' (chlist) records 45 bytes but its channel list ends after 37"),
+              std::string::npos)
+        << shorter;
+    // The walk reaches an oversized attribute after a well-formed list.
+    const std::string after = corruptHeaderMessage(
+        {kType + attribute("channels", "chlist", list) + attribute("blob", "opaque", "x", 0x6c000000u)});
+    EXPECT_NE(after.find("header attribute 'blob' (opaque) claims 1811939328 bytes"), std::string::npos) << after;
+}
+
+TEST(ExrHeader, AFixedSizeAttributeOfAnotherSizeIsCorrupt) {
+    const struct {
+        const char* type;
+        std::uint32_t size, recorded;
+    } cases[] = {{"box2i", 16, 13},      {"box2f", 16, 20}, {"v2f", 8, 4},   {"v2i", 8, 12},  {"float", 4, 1},
+                 {"int", 4, 8},          {"compression", 1, 4}, {"lineOrder", 1, 0}, {"tiledesc", 9, 12},
+                 {"m44f", 64, 16},       {"double", 8, 4}, {"chromaticities", 32, 8}, {"keycode", 28, 4}};
+    for (const auto& c : cases) {
+        const std::string message =
+            corruptHeaderMessage({kType + attribute("odd", c.type, std::string(c.recorded, '\0'))});
+        EXPECT_NE(message.find(concatForTest("header attribute 'odd' (", c.type, ") records ", c.recorded,
+                                             " bytes but a ", c.type, " holds ", c.size)),
+                  std::string::npos)
+            << message;
+    }
+}
+
+TEST(ExrHeader, VariableSizeAttributesMustFillTheirSize) {
+    std::string strings;
+    appendLittleEndian(strings, 3);
+    strings += "abc";
+    std::string overrun = strings;
+    appendLittleEndian(overrun, 9);
+    overrun += "de";
+    EXPECT_NE(corruptHeaderMessage({kType + attribute("names", "stringvector", overrun)})
+                  .find("'names' (stringvector) records 13 bytes but a string in it runs past them"),
+              std::string::npos);
+    EXPECT_NE(corruptHeaderMessage({kType + attribute("names", "stringvector", strings + "de")})
+                  .find("'names' (stringvector) records 9 bytes but its strings do not fill them"),
+              std::string::npos);
+    EXPECT_NE(corruptHeaderMessage({kType + attribute("weights", "floatvector", std::string(6, '\0'))})
+                  .find("'weights' (floatvector) records 6 bytes but that is not a whole number of floats"),
+              std::string::npos);
+    std::string preview;
+    appendLittleEndian(preview, 2);
+    appendLittleEndian(preview, 3);
+    EXPECT_NE(corruptHeaderMessage({kType + attribute("preview", "preview", preview + std::string(20, '\0'))})
+                  .find("'preview' (preview) records 28 bytes but its preview image needs 32"),
+              std::string::npos);
+    EXPECT_NE(corruptHeaderMessage({kType + attribute("ids", "idmanifest", "ab")})
+                  .find("'ids' (idmanifest) records 2 bytes but an idmanifest needs at least 4"),
+              std::string::npos);
+}
+
+// Each part of a multi-part file has its own header, read in turn.
+TEST(ExrHeader, EveryPartOfAMultiPartFileIsChecked) {
+    const std::string part0 = kType + attribute("name", "string", "first");
+    const std::string part1 = kType + attribute("name", "string", "second") +
+                              attribute("dataWindow", "box2i", std::string(13, '\0'));
+    const std::string message = corruptHeaderMessage({part0, part1});
+    EXPECT_NE(message.find("part 1 header attribute 'dataWindow' (box2i) records 13 bytes but a box2i holds 16"),
+              std::string::npos)
+        << message;
 }
 
 TEST(ExrErrorBounds, NanAndBoundsBelowFloat32AreRefused) {
