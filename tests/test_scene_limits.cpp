@@ -98,6 +98,29 @@ TEST(SceneLimits, HairBallAtTheEdgesOfItsRangesIsFinite) {
         for (const float c : p) ASSERT_TRUE(std::isfinite(c));
 }
 
+// Generating hair takes time and memory in proportion to its points: the
+// caller bounds them, across all hair balls, before any is generated.
+TEST(SceneLimits, HairBallPointsAreBoundedBeforeGenerating) {
+    dsm::SceneReadOptions small;
+    small.maxHairPoints = 1000;
+    const std::string ball = hairBall(R"("count": 100, "segments": 9)");  // 1000 points
+    const dsm::Scene one = dsm::parseScene(sceneText(ball), "", "test.json", small);
+    EXPECT_EQ(std::get<dsm::Curves>(one.objects.at(0).geometry).points.size(), 1000u);
+    const dsm::Error two = parseError(sceneText(ball + ", " + ball), small);
+    EXPECT_EQ(two.code(), dsm::ErrorCode::limit);
+    EXPECT_NE(std::string(two.what()).find("/objects/1/hairball: 1000 hair points would bring the scene's hair balls "
+                                            "to 2000, more than the limit of 1000"),
+              std::string::npos)
+        << two.what();
+    expectOneShortLine(two);
+    // Ten million hairs: refused at once rather than generated.
+    const dsm::Error huge = parseError(sceneText(hairBall(R"("count": 10000000, "segments": 9)")), small);
+    EXPECT_EQ(huge.code(), dsm::ErrorCode::limit);
+    EXPECT_NE(std::string(huge.what()).find("/objects/0/hairball: 100000000 hair points"), std::string::npos)
+        << huge.what();
+    EXPECT_EQ(dsm::SceneReadOptions{}.maxHairPoints, 100'000'000u);
+}
+
 // ---------------------------------------------------------------------------
 // Nesting: formatting a 100,000-deep value once overflowed the stack.
 

@@ -191,7 +191,18 @@ std::string inText(const Range& range) {
 
 class Parser {
 public:
-    Parser(std::string name, std::string baseDirectory) : name_(std::move(name)), base_(std::move(baseDirectory)) {}
+    Parser(std::string name, std::string baseDirectory, std::uint64_t maxHairPoints)
+        : name_(std::move(name)), base_(std::move(baseDirectory)), maxHairPoints_(maxHairPoints) {}
+
+    /// Counts `points` more generated hair points against
+    /// SceneReadOptions::maxHairPoints before they are generated.
+    void addHairPoints(const std::string& path, std::uint64_t points) const {
+        if (points > maxHairPoints_ - std::min(hairPoints_, maxHairPoints_))
+            fail(path, detail::concat(points, " hair points would bring the scene's hair balls to ",
+                                      hairPoints_ + points, ", more than the limit of ", maxHairPoints_),
+                 ErrorCode::limit);
+        hairPoints_ += points;
+    }
 
     [[noreturn]] void fail(const std::string& path, const std::string& message,
                            ErrorCode code = ErrorCode::scene) const {
@@ -334,6 +345,9 @@ public:
 private:
     std::string name_;
     std::string base_;
+    std::uint64_t maxHairPoints_;
+    /// Points the hair balls parsed so far generate (the parser is const).
+    mutable std::uint64_t hairPoints_ = 0;
 };
 
 // ---------------------------------------------------------------------------
@@ -655,6 +669,7 @@ Curves parseHair(const Parser& p, const json& v, const std::string& path) {
     if (static_cast<std::uint64_t>(h.count) * (h.segments + 1ull) > kMaxHairBallPoints)
         p.fail(bpath, detail::concat("count * (segments + 1) exceeds ", kMaxHairBallPoints, " points"),
                ErrorCode::limit);
+    p.addHairPoints(bpath, static_cast<std::uint64_t>(h.count) * (h.segments + 1ull));
     try {
         return generateHairBall(h);
     } catch (const Error& e) {
@@ -1159,7 +1174,7 @@ Curves loadHairFile(const std::string& path) {
 
 Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name,
                  const SceneReadOptions& options) {
-    const Parser p(name, baseDirectory);
+    const Parser p(name, baseDirectory, options.maxHairPoints);
     if (jsonText.size() > options.maxBytes)
         p.fail("", detail::concat("is ", jsonText.size(), " bytes, more than the limit of ", options.maxBytes),
                ErrorCode::limit);

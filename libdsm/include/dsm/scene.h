@@ -150,6 +150,11 @@ struct SceneReadOptions {
     /// Largest scene text read, in bytes; a larger scene is refused with
     /// ErrorCode::limit before it is read (or as soon as a stream exceeds it).
     std::uint64_t maxBytes = std::uint64_t{256} << 20;
+    /// Most points the scene's hair balls may generate together (each hair
+    /// has segments + 1); a scene asking for more is refused with
+    /// ErrorCode::limit before its hair is generated. The default is the
+    /// per-ball cap of 10^8, which a larger value does not lift.
+    std::uint64_t maxHairPoints = 100'000'000;
 };
 
 /// Deepest nesting of arrays and objects a scene may have (the top-level object
