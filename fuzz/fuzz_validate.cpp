@@ -24,48 +24,9 @@
 #include <string>
 #include <vector>
 
-#include <sys/mman.h>
-#include <unistd.h>
+#include "scratch_file.h"
 
 namespace {
-
-// One scratch file per process, rewritten for every input: an anonymous
-// in-memory file (reopened by the reader through /proc/self/fd), or a
-// temporary file where memfd_create is not available.
-struct Scratch {
-    int fd = -1;
-    std::string path;
-
-    Scratch() {
-        fd = ::memfd_create("fuzz_validate.dsm", MFD_CLOEXEC);
-        if (fd >= 0) {
-            path = "/proc/self/fd/" + std::to_string(fd);
-            return;
-        }
-        const char* tmp = std::getenv("TMPDIR");
-        std::string pattern = std::string(tmp && *tmp ? tmp : "/tmp") + "/fuzz_validate-XXXXXX";
-        fd = ::mkstemp(pattern.data());
-        if (fd < 0) {
-            std::perror("fuzz_validate: cannot create a scratch file");
-            std::abort();
-        }
-        path = pattern;
-    }
-    ~Scratch() {
-        ::close(fd);
-        if (path.rfind("/proc/", 0) != 0) ::unlink(path.c_str());
-    }
-
-    void write(const std::uint8_t* data, std::size_t size) {
-        if (::ftruncate(fd, static_cast<off_t>(size)) != 0) std::abort();
-        std::size_t done = 0;
-        while (done < size) {
-            const ssize_t n = ::pwrite(fd, data + done, size - done, static_cast<off_t>(done));
-            if (n <= 0) std::abort();
-            done += static_cast<std::size_t>(n);
-        }
-    }
-};
 
 // Limits for untrusted files, tightened so that one input cannot ask for more
 // than a few MB or a few million pixel reads (the defaults allow GB tiles and
@@ -185,7 +146,7 @@ private:
 };
 
 // One file: validate, and read it all when validate accepts it.
-void check(Scratch& scratch, const std::uint8_t* data, std::size_t size, const dsm::ReaderOptions& options) {
+void check(ScratchFile& scratch, const std::uint8_t* data, std::size_t size, const dsm::ReaderOptions& options) {
     scratch.write(data, size);
     try {
         dsm::validate(scratch.path, options);
@@ -200,7 +161,7 @@ void check(Scratch& scratch, const std::uint8_t* data, std::size_t size, const d
 }  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
-    static Scratch scratch;
+    static ScratchFile scratch("fuzz_validate.dsm");
     static const dsm::ReaderOptions options = fuzzOptions();
     check(scratch, data, size, options);
     std::vector<std::uint8_t> resealed(data, data + size);

@@ -498,9 +498,9 @@ TEST(SceneErrors, WrongTypesNameThePath) {
         {"type": "sphere", "radius": 1, "opacity": "red"})")),
               "scene 'test.json': /objects/2/opacity: expected a number or [r, g, b] in [0, 1], got \"red\"");
     EXPECT_CONTAINS(parseError(sceneText(R"({"type": "sphere", "radius": "big"})")),
-                    "scene 'test.json': /objects/0/radius: expected a number > 0, got \"big\"");
+                    "scene 'test.json': /objects/0/radius: expected a number in [1e-12, 1e+12], got \"big\"");
     EXPECT_CONTAINS(parseError(sceneText(R"({"type": "sphere", "radius": 1, "center": [1, 2]})")),
-                    "/objects/0/center: expected [x, y, z] (3 numbers), got [1,2]");
+                    "/objects/0/center: expected [x, y, z] (3 numbers in [-1e+12, 1e+12]), got [1,2]");
     EXPECT_CONTAINS(parseError(sceneText(R"({"type": "cube"})")),
                     "/objects/0/type: expected \"mesh\", \"sphere\", \"quad\", \"plane\", \"hair\", \"curves\" or "
                     "\"volume\", got \"cube\"");
@@ -519,13 +519,13 @@ TEST(SceneErrors, WrongTypesNameThePath) {
 TEST(SceneErrors, OutOfRangeValues) {
     EXPECT_CONTAINS(
         parseError(sceneText("", R"({"type": "spot", "position": [0,0,0], "direction": [0,0,1], "fov": 180})")),
-        "/light/fov: expected a number in (0, 180), got 180");
+        "/light/fov: expected a number in [0.001, 180), got 180");
     EXPECT_CONTAINS(parseError(sceneText(
                         "", R"({"type": "spot", "position": [0,0,0], "direction": [0,0,1], "resolution": [0, 4]})")),
                     "/light/resolution/0: expected an integer in [1, 131072], got 0");
     EXPECT_CONTAINS(
         parseError(sceneText("", R"({"type": "spot", "position": [0,0,0], "direction": [0,0,1], "near": -1})")),
-        "/light/near: expected a number >= 0, got -1");
+        "/light/near: expected a number in [0, 1e+12], got -1");
     EXPECT_CONTAINS(parseError(sceneText(R"({"type": "sphere", "radius": 1, "opacity": [1, 1, 1.5]})")),
                     "/objects/0/opacity: expected a number or [r, g, b] in [0, 1], got [1,1,1.5]");
     EXPECT_CONTAINS(parseError(sceneText(R"({"type": "volume", "bounds": [[0,0,0],[1,1,1]],
@@ -585,11 +585,11 @@ TEST(SceneErrors, UnknownKeysAndMisuse) {
 }
 
 TEST(SceneErrors, InvalidJsonAndDuplicateKeys) {
-    EXPECT_CONTAINS(parseError("{\"light\": "), "scene 'test.json': invalid JSON: ");
+    EXPECT_CONTAINS(parseError("{\"light\": "), "scene 'test.json': /light: invalid JSON: ");
     EXPECT_CONTAINS(
         parseError(
             R"({"light": {"type": "spot", "type": "distant", "position": [0,0,0], "direction": [0,0,1]}, "objects": []})"),
-        "key \"type\" appears twice in one object");
+        "scene 'test.json': /light/type: key \"type\" appears twice in one object");
 }
 
 TEST(SceneErrors, MissingFilesAreNamed) {
@@ -723,9 +723,28 @@ TEST(SceneFiles, BadHairFilesAreRejected) {
     EXPECT_CONTAINS(hairError((dir / "mismatch.hair").string()), "add up to 6 points but the header says 7");
 
     auto huge = good;
-    putU32(huge, 8, 0xFFFFFFFFu);  // a point count far beyond the file
+    putU32(huge, 8, 10'000'000u);  // a point count far beyond the file
     writeBytes(dir / "huge.hair", huge);
     EXPECT_CONTAINS(hairError((dir / "huge.hair").string()), "(truncated)");
+
+    // Counts from the header are checked before anything is allocated for them.
+    auto tooMany = good;
+    putU32(tooMany, 8, 0xFFFFFFFFu);
+    writeBytes(dir / "too_many.hair", tooMany);
+    try {
+        dsm::loadHairFile((dir / "too_many.hair").string());
+        ADD_FAILURE() << "no error";
+    } catch (const dsm::Error& e) {
+        EXPECT_EQ(e.code(), dsm::ErrorCode::limit);
+        EXPECT_CONTAINS(std::string(e.what()), "has 4294967295 points, more than the limit of 100000000");
+    }
+    HairSpec uniform = h;  // no segments array: the file's size does not bound the hair count
+    uniform.segments.clear();
+    uniform.defaultSegments = 2;
+    uniform.hairCount = 0xFFFFFFFFu;
+    writeBytes(dir / "many_hairs.hair", hairBytes(uniform));
+    EXPECT_CONTAINS(hairError((dir / "many_hairs.hair").string()),
+                    "has 4294967295 hairs but only 7 points (every hair has at least 2)");
 
     auto trailing = good;
     trailing.push_back(0);

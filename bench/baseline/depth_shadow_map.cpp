@@ -4,7 +4,6 @@
 #include <cmath>
 #include <filesystem>
 #include <limits>
-#include <system_error>
 
 #include <OpenImageIO/imageio.h>
 #include <tbb/blocked_range.h>
@@ -12,6 +11,8 @@
 #include <tbb/task_arena.h>
 
 #include "dsm/error.h"
+#include "dsm/output_file.h"
+#include "dsm/threads.h"
 #include "light_rays.h"
 #include "ray_caster.h"
 #include "text.h"
@@ -34,7 +35,7 @@ DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions&
 
     const detail::LightRayFrame frame = detail::lightRayFrame(map.camera_, map.width_, map.height_);
     const RayCaster caster(scene);
-    tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic : static_cast<int>(options.threads));
+    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads)));
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, map.height_), [&](const auto& rows) {
             std::vector<RaySurfaceHit> hits;
@@ -109,26 +110,22 @@ double DepthShadowMap::lookupWorld(const Vec3& point, double filterWidth, double
 }
 
 std::uint64_t DepthShadowMap::writeExr(const std::string& path) const {
-    const std::string temporary = path + ".tmp-depth";
-    {
-        auto out = OIIO::ImageOutput::create(path);
-        if (!out) throw Error(concat("'", path, "': cannot write: ", OIIO::geterror()));
-        OIIO::ImageSpec spec(static_cast<int>(width_), static_cast<int>(height_), 1, OIIO::TypeDesc::FLOAT);
-        spec.channelnames = {"Z"};
-        spec.attribute("compression", "zip");
-        spec.attribute("oiio:ColorSpace", "Linear");
-        if (!out->open(temporary, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, depth_.data()) || !out->close()) {
-            std::error_code ignored;
-            std::filesystem::remove(temporary, ignored);
-            throw Error(concat("'", path, "': cannot write: ", out->geterror()));
-        }
-    }
-    std::error_code error;
-    std::filesystem::rename(temporary, path, error);
-    if (error) {
-        std::filesystem::remove(temporary, error);
-        throw Error(concat("'", path, "': cannot rename the finished file into place"));
-    }
+    auto out = OIIO::ImageOutput::create(path);
+    if (!out) throw Error(ErrorCode::argument, concat("'", path, "': cannot write: ", OIIO::geterror()));
+    OIIO::ImageSpec spec(static_cast<int>(width_), static_cast<int>(height_), 1, OIIO::TypeDesc::FLOAT);
+    spec.channelnames = {"Z"};
+    spec.attribute("compression", "zip");
+    spec.attribute("oiio:ColorSpace", "Linear");
+    OutputFile output(path, std::filesystem::path(path).extension().string());
+    if (!out->open(output.temporaryPath(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, depth_.data()) ||
+        !out->close())
+        throw Error(ErrorCode::io, concat("'", path, "': cannot write: ", out->geterror()));
+    // OpenEXR reports failed writes, but a file that does not read back must not replace `path`.
+    const auto written = OIIO::ImageInput::open(output.temporaryPath());
+    std::vector<float> check(depth_.size());
+    if (!written || !written->read_image(0, 0, 0, 1, OIIO::TypeDesc::FLOAT, check.data()))
+        throw Error(ErrorCode::io, concat("'", path, "': the written file does not read back"));
+    output.commit();
     return std::filesystem::file_size(path);
 }
 

@@ -21,7 +21,8 @@ struct DepthMapOptions {
     /// Jitter each sample inside its pixel (otherwise pixel centres).
     bool jitter = true;
     std::uint64_t seed = 1;
-    /// Worker threads; 0 = all cores. The map does not depend on it.
+    /// Worker threads; 0 = all cores, and more than the cores are clamped to
+    /// them (usableThreads(), dsm/threads.h). The map does not depend on it.
     unsigned threads = 0;
 };
 

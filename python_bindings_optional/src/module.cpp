@@ -28,6 +28,7 @@
 #include "dsm/sampler.h"
 #include "dsm/scene.h"
 #include "dsm/soft_shadow.h"
+#include "dsm/threads.h"
 #include "dsm/tile_cache.h"
 
 namespace py = pybind11;
@@ -76,7 +77,7 @@ py::array_t<double> valuesArray(const std::vector<double>& values, int channels)
 }
 
 unsigned workerCount(int threads, std::size_t work) {
-    unsigned n = threads > 0 ? static_cast<unsigned>(threads) : std::max(1u, std::thread::hardware_concurrency());
+    const unsigned n = dsm::usableThreads(threads > 0 ? static_cast<unsigned>(threads) : 0u);
     // Below a few thousand points a thread costs more than it saves.
     const std::size_t useful = std::max<std::size_t>(1, work / 4096);
     return static_cast<unsigned>(std::min<std::size_t>(n, useful));

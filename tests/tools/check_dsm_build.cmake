@@ -159,7 +159,7 @@ elseif(CHECK STREQUAL "version")
 elseif(CHECK STREQUAL "bad_value")
   # Values dsm-build checks itself: status 2, one line, nothing built.
   foreach(args IN ITEMS "--tolerance;abc" "--tolerance;-1" "--region;1,2" "--region;0,0,8,x" "-r;64x" "-r;16x8x"
-                        "--mip-levels;0" "--mip-levels;1.5")
+                        "--mip-levels;0" "--mip-levels;1.5" "--spp;0" "--filter-width;0" "--mtsm-layers;0")
     run("${SCENE}" -o "${MAP}" ${args})
     expect_rc(2)
     expect_empty(OUT)
@@ -201,7 +201,7 @@ elseif(CHECK STREQUAL "json_error")
   file(WRITE "${bad}" "{\"light\": {\"type\": \"spot\",,}}\n")
   run("${bad}" -o "${MAP}")
   expect_rc(1)
-  expect_one_error_line("dsm-build: ERROR scene '${bad}': invalid JSON: ")
+  expect_one_error_line("dsm-build: ERROR scene '${bad}': /light: invalid JSON: ")
   expect_contains(ERR "line 1, column")
   expect_no_file("${MAP}")
   # An existing file is left alone by a failed build.
@@ -215,7 +215,7 @@ elseif(CHECK STREQUAL "json_error")
 
 elseif(CHECK STREQUAL "build_error")
   # Options the library rejects: status 1, one line naming the output, nothing built.
-  foreach(args IN ITEMS "--region;0,0,100,100" "--spp;0" "--tile-size;3" "--filter-width;0" "--mtsm-layers;0")
+  foreach(args IN ITEMS "--region;0,0,100,100" "--tile-size;3")
     run("${SCENE}" -o "${MAP}" -r 16 ${args})
     expect_rc(1)
     expect_empty(OUT)

@@ -1,20 +1,17 @@
 #include "image_io.h"
 
 #include <algorithm>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <cstdint>
 #include <filesystem>
 #include <fstream>
-#include <random>
 #include <string_view>
-#include <system_error>
 #include <vector>
 
 #include <OpenImageIO/imageio.h>
 
 #include "dsm/error.h"
+#include "dsm/output_file.h"
 #include "text.h"
 
 namespace dsm {
@@ -63,12 +60,41 @@ std::vector<std::string> channelNames(int channels) {
     }
 }
 
-/// A name beside `path` for writing before the rename, keeping the extension
-/// (some writers look at it) and unlikely to be taken.
-fs::path temporaryBeside(const fs::path& path) {
-    std::random_device random;
-    const auto tag = std::to_string(random()) + std::to_string(random());
-    return path.parent_path() / (concat(".", path.stem().string(), ".tmp-", tag) + path.extension().string());
+/// The bytes a complete file of the format ends with, where the format has
+/// such a mark: PNG's IEND chunk, JPEG's end-of-image marker.
+std::string_view requiredEnding(std::string_view formatName) {
+    static constexpr char kPngEnd[] = "\0\0\0\0IEND\xae\x42\x60\x82";
+    static constexpr char kJpegEnd[] = "\xff\xd9";
+    if (formatName == "png") return {kPngEnd, sizeof kPngEnd - 1};
+    if (formatName == "jpeg") return {kJpegEnd, sizeof kJpegEnd - 1};
+    return {};
+}
+
+/// Checks the picture OpenImageIO wrote before it replaces `path`: some of its
+/// writers (PNG) do not report a failed write, e.g. on a full disk. The file
+/// must end as its format requires and read back whole with the image's size.
+void verifyWrittenPicture(const OutputFile& file, std::string_view formatName, const FloatImage& image) {
+    const std::string& written = file.temporaryPath();
+    const auto fail = [&](const std::string& why) {
+        throw Error(ErrorCode::io, concat(where(file.path()), ": cannot write: the written file ", why));
+    };
+    if (const std::string_view ending = requiredEnding(formatName); !ending.empty()) {
+        std::ifstream in(written, std::ios::binary | std::ios::ate);
+        const std::streamoff size = in ? std::streamoff(in.tellg()) : std::streamoff(-1);
+        std::string tail(ending.size(), '\0');
+        if (size < std::streamoff(ending.size()) || !in.seekg(size - std::streamoff(ending.size())) ||
+            !in.read(tail.data(), std::streamsize(tail.size())) || tail != ending)
+            fail("is truncated (the disk may be full)");
+    }
+    auto in = OIIO::ImageInput::open(written);
+    if (!in) fail(concat("does not read back: ", oneLine(OIIO::geterror(), written, file.path())));
+    const OIIO::ImageSpec& spec = in->spec();
+    if (spec.width != static_cast<int>(image.width) || spec.height != static_cast<int>(image.height) ||
+        spec.nchannels != image.channels)
+        fail(concat("reads back as ", spec.width, " x ", spec.height, " x ", spec.nchannels));
+    std::vector<float> values(image.values.size());
+    if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, values.data()))
+        fail(concat("does not read back: ", oneLine(in->geterror(), written, file.path())));
 }
 
 /// round(255 * clamp(v, 0, 1)), with NaN as 0.
@@ -104,26 +130,11 @@ void writeImage(const std::string& path, const FloatImage& image) {
     // (a PNG gets a gAMA chunk of 1.0).
     spec.attribute("oiio:ColorSpace", "Linear");
 
-    const fs::path temporary = temporaryBeside(path);
-    const auto discard = [&] {
-        std::error_code ignored;
-        fs::remove(temporary, ignored);
-    };
-    {
-        // Creating it first gives the system's reason when the place cannot
-        // be written (OpenImageIO only says it could not open the file).
-        errno = 0;
-        std::ofstream probe(temporary, std::ios::binary);
-        if (!probe) {
-            const std::string why = errno ? std::strerror(errno) : "cannot create a file there";
-            throw Error(concat(where(path), ": cannot write: ", why));
-        }
-    }
-    if (!out->open(temporary.string(), spec)) {
-        const std::string why = oneLine(out->geterror(), temporary.string(), path);
-        discard();
-        throw Error(concat(where(path), ": cannot write: ", why));
-    }
+    // The temporary keeps the extension: OpenImageIO chooses a reader by it.
+    OutputFile output(path, fs::path(path).extension().string());
+    const std::string& temporary = output.temporaryPath();
+    if (!out->open(temporary, spec))
+        throw Error(ErrorCode::io, concat(where(path), ": cannot write: ", oneLine(out->geterror(), temporary, path)));
     bool written = false;
     if (floats) {
         written = out->write_image(OIIO::TypeDesc::FLOAT, image.values.data());
@@ -132,17 +143,10 @@ void writeImage(const std::string& path, const FloatImage& image) {
         written = out->write_image(OIIO::TypeDesc::UINT8, bytes.data());
     }
     const bool closed = out->close();
-    if (!written || !closed) {
-        const std::string why = oneLine(out->geterror(), temporary.string(), path);
-        discard();
-        throw Error(concat(where(path), ": cannot write: ", why));
-    }
-    std::error_code error;
-    fs::rename(temporary, path, error);
-    if (error) {
-        discard();
-        throw Error(concat(where(path), ": cannot write: ", error.message()));
-    }
+    if (!written || !closed)
+        throw Error(ErrorCode::io, concat(where(path), ": cannot write: ", oneLine(out->geterror(), temporary, path)));
+    verifyWrittenPicture(output, out->format_name(), image);
+    output.commit();
 }
 
 FloatImage readImage(const std::string& path) {

@@ -9,12 +9,18 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <new>
 #include <string>
 #include <string_view>
 #include <system_error>
 #include <unistd.h>
+#include <vector>
 
 #include <CLI/CLI.hpp>
+
+#include "dsm/output_file.h"
+
+#include "input_file.h"
 
 #ifndef DSM_TOOLS_VERSION
 #define DSM_TOOLS_VERSION "unknown"
@@ -32,6 +38,15 @@ inline std::string oneLine(std::string s) {
     for (char& c : s)
         if (c == '\n' || c == '\r') c = ' ';
     return s;
+}
+
+/// The message to print for an exception. An allocation failure is an input
+/// that needs more memory than the process may have (ErrorCode::limit): it is
+/// said so in words rather than as "std::bad_alloc".
+inline std::string exceptionMessage(const std::exception& e) {
+    if (dynamic_cast<const std::bad_alloc*>(&e))
+        return "out of memory (the input needs more memory than this process may use)";
+    return e.what();
 }
 
 /// `<tool>: ERROR '<file>': <message>`. libdsm's messages already start with
@@ -79,40 +94,18 @@ inline int parseArguments(CLI::App& app, int argc, char** argv) {
     return -1;
 }
 
-/// A file argument that may be "-" (standard input). Library readers need a
-/// seekable file, so standard input is copied to a temporary file first, which
-/// is removed when this object goes away. path() is what to open; name() is
-/// what to print in messages ("<stdin>" for "-").
-class InputFile {
-public:
-    explicit InputFile(const std::string& argument) : name_(argument), path_(argument) {
-        if (argument != "-") return;
-        name_ = "<stdin>";
-        const auto directory = std::filesystem::temp_directory_path();
-        std::string pattern = (directory / "dsm-stdin-XXXXXX").string();
-        const int fd = ::mkstemp(pattern.data());
-        if (fd < 0) throw std::runtime_error("cannot create a temporary file for standard input");
-        ::close(fd);
-        path_ = pattern;
-        temporary_ = true;
-        std::ofstream out(path_, std::ios::binary);
-        out << std::cin.rdbuf();
-        if (!out) throw std::runtime_error("cannot copy standard input to " + path_);
+/// Refuses, before any work, outputs that cannot be written or would destroy
+/// an input: every output is checked (dsm::checkOutputPath), no output is the
+/// same file as an input ("-" stands for the file standard input comes from)
+/// and no two outputs are the same file. Throws dsm::Error naming the output.
+inline void checkOutputs(const std::vector<std::string>& outputs, const std::vector<std::string>& inputs) {
+    std::vector<std::string> files;
+    for (const std::string& input : inputs) files.push_back(input == "-" ? "/dev/stdin" : input);
+    for (const std::string& output : outputs) {
+        dsm::checkOutputPath(output);
+        dsm::refuseOutputOverInputs(output, files);
     }
-    ~InputFile() {
-        std::error_code ignored;
-        if (temporary_) std::filesystem::remove(path_, ignored);
-    }
-    InputFile(const InputFile&) = delete;
-    InputFile& operator=(const InputFile&) = delete;
-
-    const std::string& path() const { return path_; }
-    const std::string& name() const { return name_; }
-
-private:
-    std::string name_;
-    std::string path_;
-    bool temporary_ = false;
-};
+    dsm::refuseSharedOutputs(outputs);
+}
 
 }  // namespace dsm::tools

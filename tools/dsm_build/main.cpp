@@ -3,9 +3,13 @@
 #include <dsm/sampler.h>
 #include <dsm/scene.h>
 
+#include "option_checks.h"
+#include "tool_support.h"
+
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include <array>
 #include <chrono>
 #include <cstdio>
 #include <fstream>
@@ -16,6 +20,30 @@
 #include <unistd.h>
 
 namespace {
+
+/// A map is at most 131072 pixels wide: at most 18 mip levels.
+constexpr double kMaxMipLevels = 18;
+
+/// --region X0,Y0,X1,Y1: four decimal integers, X0 < X1 and Y0 < Y1 (an empty
+/// region is refused, not taken for the whole map).
+std::array<std::uint32_t, 4> parseRegion(const std::string& text) {
+    std::array<std::uint32_t, 4> r{};
+    std::size_t start = 0;
+    for (std::size_t k = 0; k < 4; ++k) {
+        const std::size_t end = k < 3 ? text.find(',', start) : text.size();
+        std::uint64_t value = 0;
+        if (end == std::string::npos ||
+            !dsm::tools::parseUnsigned(std::string_view(text).substr(start, end - start), value) ||
+            value > UINT32_MAX)
+            throw std::invalid_argument("--region expects X0,Y0,X1,Y1, got '" + text +
+                                        "' (four integers in [0, 4294967295])");
+        r[k] = static_cast<std::uint32_t>(value);
+        start = end + 1;
+    }
+    if (r[0] >= r[2] || r[1] >= r[3])
+        throw std::invalid_argument("--region " + text + " is empty (X0 < X1 and Y0 < Y1 are needed)");
+    return r;
+}
 
 // Parses "auto" or a number (0 is allowed where the option allows it).
 bool parseAutoOr(const std::string& text, double& value) {
@@ -36,6 +64,30 @@ std::string humanBytes(double bytes) {
     char buffer[32];
     std::snprintf(buffer, sizeof buffer, u == 0 ? "%.0f %s" : "%.2f %s", bytes, units[u]);
     return buffer;
+}
+
+/// Maps above this many pixels (16384^2) are announced before they start.
+constexpr std::uint64_t kAnnouncedPixels = std::uint64_t{16384} * 16384;
+
+/// Physical memory of the machine, or 0 when unknown.
+std::uint64_t physicalMemory() {
+    const long pages = ::sysconf(_SC_PHYS_PAGES), pageSize = ::sysconf(_SC_PAGESIZE);
+    return pages > 0 && pageSize > 0 ? std::uint64_t(pages) * std::uint64_t(pageSize) : 0;
+}
+
+/// One line on standard error before a build that will take long or may not
+/// fit: what it is about to do and the memory it expects to hold.
+void announceLargeBuild(const dsm::BuildEstimate& e, std::uint32_t spp) {
+    const std::uint64_t machine = physicalMemory();
+    const bool tooBig = machine && e.memoryBytes > machine;
+    if (std::uint64_t(e.width) * e.height <= kAnnouncedPixels && !tooBig) return;
+    const std::string pixels = e.pixels == std::uint64_t(e.width) * e.height
+                                   ? std::to_string(e.width) + " x " + std::to_string(e.height) + " pixels"
+                                   : std::to_string(e.pixels) + " region pixels";
+    std::fprintf(stderr, "dsm-build: %s x %u samples = %llu sample rays, about %s of memory%s\n", pixels.c_str(),
+                 spp, static_cast<unsigned long long>(e.sampleRays), humanBytes(double(e.memoryBytes)).c_str(),
+                 tooBig ? (", more than the machine's " + humanBytes(double(machine))).c_str() : "");
+    std::fflush(stderr);
 }
 
 // A progress bar with ETA on a terminal, a plain line every 10% otherwise.
@@ -72,6 +124,7 @@ private:
 }  // namespace
 
 int main(int argc, char** argv) {
+    using dsm::tools::finiteNumberIn, dsm::tools::integerIn, dsm::tools::LowerBound;
     CLI::App app{"dsm-build: render a scene from its light into a deep shadow map (.dsm)"};
     app.set_version_flag("--version", std::string("dsm-build ") + DSM_TOOLS_VERSION);
     std::string scenePath, output, resolution, tolerance = "auto", filter = "gaussian", mipLevels = "auto", region;
@@ -81,32 +134,42 @@ int main(int argc, char** argv) {
     app.add_option("scene", scenePath, "Scene description (JSON, see spec/scene.md); - reads stdin")->required();
     app.add_option("-o,--output", output, "Output .dsm file")->required();
     app.add_option("-r,--resolution", resolution, "Map size WxH or N (default: the scene light's)");
-    app.add_option("-s,--spp", options.samplesPerPixel, "Samples per pixel (stratified, jittered)")
+    app.add_option("-s,--spp", options.samplesPerPixel, "Samples per pixel (stratified, jittered), 1..65536")
+        ->check(integerIn(1, 65536))
         ->capture_default_str();
-    app.add_option("-e,--tolerance", tolerance, "Compression tolerance: auto (0.25/sqrt(spp)) or a value >= 0")
+    app.add_option("-e,--tolerance", tolerance, "Compression tolerance: auto (0.25/sqrt(spp)) or a value in [0, 1]")
         ->capture_default_str();
     app.add_option("-f,--filter", filter, "Pixel filter: box, triangle or gaussian")
         ->check(CLI::IsMember({"box", "triangle", "gaussian"}))
         ->capture_default_str();
-    app.add_option("-w,--filter-width", options.filterWidth, "Filter width in pixels")->capture_default_str();
+    app.add_option("-w,--filter-width", options.filterWidth, "Filter width in pixels, in (0, 64]")
+        ->check(finiteNumberIn(0.0, 64.0, LowerBound::Exclusive))
+        ->capture_default_str();
     app.add_option("-m,--mip-levels", mipLevels, "Mip levels: auto (full pyramid) or N (1 = none)")
         ->capture_default_str();
-    app.add_option("-t,--tile-size", options.tileSize, "Tile size: a power of two, 2..4096")->capture_default_str();
-    app.add_option("-l,--mtsm-layers", options.mtsmLayers, "Layers per pixel (> 1 builds an MTSM with counts)")
+    app.add_option("-t,--tile-size", options.tileSize, "Tile size: a power of two, 2..4096")
+        ->check(integerIn(2, 4096))
+        ->capture_default_str();
+    app.add_option("-l,--mtsm-layers", options.mtsmLayers, "Layers per pixel, 1..255 (> 1 builds an MTSM with counts)")
+        ->check(integerIn(1, 255))
         ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_option("--region", region, "Build only pixels X0,Y0,X1,Y1 (half-open), for distributed builds");
-    app.add_option("-j,--threads", options.threads, "Worker threads (0 = all cores)")->capture_default_str();
-    app.add_option("--seed", options.seed, "Random seed (a non-negative integer)")
-        ->check(CLI::Validator(
-            [](std::string& text) {
-                return text.find('-') == std::string::npos ? std::string() : "expects a non-negative integer";
-            },
-            "UINT", "non-negative"))
+    app.add_option("-j,--threads", options.threads, "Worker threads (0 = all cores; more are clamped to the cores)")
+        ->check(integerIn(0, UINT32_MAX))
         ->capture_default_str();
-    app.add_option("-z,--zlib-level", options.zlibLevel, "zlib level 0..9 (0 stores tiles)")->capture_default_str();
+    app.add_option("--seed", options.seed, "Random seed, an integer in [0, 2^64 - 1]")
+        ->check(integerIn(0, UINT64_MAX))
+        ->capture_default_str();
+    app.add_option("-z,--zlib-level", options.zlibLevel, "zlib level 0..9 (0 stores tiles)")
+        ->check(integerIn(0, 9))
+        ->capture_default_str();
     app.add_flag("-q,--quiet", quiet, "No progress or summary");
     app.add_option("--stats-json", statsJson, "Write the build statistics as JSON to this file");
+    std::uint64_t maxSceneMiB = dsm::SceneReadOptions{}.maxBytes >> 20;
+    app.add_option("--max-scene-mb", maxSceneMiB, "Largest scene read, in MiB, 1..1048576")
+        ->check(integerIn(1, 1u << 20))
+        ->capture_default_str();
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
@@ -143,51 +206,40 @@ int main(int argc, char** argv) {
         try {
             options.tolerance = parseAutoOr(tolerance, value) ? value : -1.0;
             if (parseAutoOr(mipLevels, value)) {
-                if (value < 1.0 || value != std::floor(value)) throw std::invalid_argument(mipLevels);
+                if (!(value >= 1.0 && value <= kMaxMipLevels) || value != std::floor(value))
+                    throw std::invalid_argument(mipLevels);
                 options.mipLevels = static_cast<unsigned>(value);
             }
         } catch (const std::exception&) {
             throw std::invalid_argument("--tolerance and --mip-levels expect auto or a number");
         }
-        if (tolerance != "auto" && !(options.tolerance >= 0.0))
-            throw std::invalid_argument("--tolerance expects auto or a value >= 0, got '" + tolerance + "'");
+        if (tolerance != "auto" && !(options.tolerance >= 0.0 && options.tolerance <= 1.0))
+            throw std::invalid_argument("--tolerance expects auto or a value in [0, 1], got '" + tolerance + "'");
         options.filter = *dsm::pixelFilterFromName(filter);  // CLI11 checked the name
-        if (!region.empty()) {
-            std::istringstream in(region);
-            char c1 = 0, c2 = 0, c3 = 0;
-            auto& r = options.region;
-            if (!(in >> r[0] >> c1 >> r[1] >> c2 >> r[2] >> c3 >> r[3]) || c1 != ',' || c2 != ',' || c3 != ',')
-                throw std::invalid_argument("--region expects X0,Y0,X1,Y1, got '" + region + "'");
-        }
+        if (app.count("--region")) options.region = parseRegion(region);
     } catch (const std::exception& e) {
         std::cerr << "dsm-build: " << e.what() << "\n";
         return 2;
     }
 
-    // Fail before the build, not after it, when the statistics cannot be
-    // written; and leave no statistics file behind when the build fails.
-    bool statsDone = false;
-    struct RemoveUnlessDone {
-        const std::string& path;
-        const bool& done;
-        ~RemoveUnlessDone() {
-            if (!path.empty() && !done) std::remove(path.c_str());
-        }
-    } statsGuard{statsJson, statsDone};
     try {
-        std::ofstream statsOut;
-        if (!statsJson.empty()) {
-            statsOut.open(statsJson);
-            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
-        }
-        dsm::Scene scene;
-        if (scenePath == "-") {
-            std::stringstream text;
-            text << std::cin.rdbuf();
-            scene = dsm::parseScene(text.str(), ".", "<stdin>");
-        } else {
-            scene = dsm::loadScene(scenePath);
-        }
+        // Before the scene is read or the build starts: outputs that cannot be
+        // written, or would replace the scene or each other, are refused.
+        std::vector<std::string> outputs{output};
+        if (app.count("--stats-json")) outputs.push_back(statsJson);
+        dsm::tools::checkOutputs(outputs, {scenePath});
+        if (scenePath != "-") dsm::tools::requireRegularFile(scenePath);  // a FIFO would block the open
+        dsm::SceneReadOptions sceneOptions;
+        sceneOptions.maxBytes = maxSceneMiB << 20;
+        const dsm::Scene scene = scenePath == "-" ? dsm::readScene(std::cin, ".", "<stdin>", sceneOptions)
+                                                  : dsm::loadScene(scenePath, sceneOptions);
+        std::vector<std::string> volumeFiles;
+        for (const dsm::SceneObject& object : scene.objects)
+            if (const auto* volume = std::get_if<dsm::Volume>(&object.geometry))
+                if (const auto* vdb = std::get_if<dsm::VdbDensity>(&volume->density)) volumeFiles.push_back(vdb->file);
+        dsm::tools::checkOutputs(outputs, volumeFiles);
+        options.threads = dsm::tools::usableThreadsNoted("dsm-build", options.threads, quiet);
+        if (!quiet) announceLargeBuild(dsm::estimateBuild(scene, options), options.samplesPerPixel);
         Progress progress(quiet);
         options.progress = [&](double f) { progress(f); };
         const dsm::BuildStats s = dsm::buildMap(scene, options, output);
@@ -211,7 +263,7 @@ int main(int argc, char** argv) {
                         s.fileBytes ? double(s.rawBytes) / double(s.fileBytes) : 0.0,
                         humanBytes(double(s.rawBytes)).c_str());
         }
-        if (!statsJson.empty()) {
+        if (app.count("--stats-json")) {
             nlohmann::json j = {{"output", output},
                                 {"wall_seconds", s.wallSeconds},
                                 {"sampling_seconds", s.samplingSeconds},
@@ -227,16 +279,16 @@ int main(int argc, char** argv) {
                                 {"file_bytes", s.fileBytes},
                                 {"raw_bytes", s.rawBytes},
                                 {"sample_vertices", s.sampleVertices}};
-            statsOut << j.dump(2) << "\n";
-            statsOut.flush();
-            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
-            statsDone = true;
+            const std::string text = j.dump(2) + "\n";
+            dsm::OutputFile stats(statsJson);
+            stats.write(text.data(), text.size());
+            stats.commit();
         }
     } catch (const dsm::Error& e) {
         std::cerr << "dsm-build: ERROR " << e.what() << "\n";
         return 1;
     } catch (const std::exception& e) {
-        std::cerr << "dsm-build: ERROR " << e.what() << "\n";
+        std::cerr << dsm::tools::oneLine("dsm-build: ERROR " + dsm::tools::exceptionMessage(e)) << "\n";
         return 1;
     }
     return 0;

@@ -8,17 +8,23 @@
 #include <filesystem>
 #include <iostream>
 #include <string>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "dsm/error.h"
 #include "dsm/exr_deep.h"
 #include "dsm/reader.h"
+#include "option_checks.h"
 #include "tool_support.h"
 
 namespace {
 
 constexpr const char* kToolName = "dsm-convert";
+/// A map is at most 131072 pixels wide: 18 levels, numbered 0..17.
+constexpr std::uint64_t kMaxMipLevel = 17;
+/// Widths in light units: any finite scene fits well inside.
+constexpr double kMaxLength = 1e30;
 
 enum class Kind { Map, Exr, Unknown };
 
@@ -33,6 +39,7 @@ Kind kindOf(const std::string& path) {
 }  // namespace
 
 int main(int argc, char** argv) {
+    using dsm::tools::finiteNumberIn, dsm::tools::integerIn, dsm::tools::LowerBound;
     CLI::App app{"Convert a deep shadow map (.dsm) to a deep OpenEXR image (.exr) or back; the direction follows "
                  "the extension of OUT.",
                  kToolName};
@@ -45,31 +52,33 @@ int main(int argc, char** argv) {
 
     dsm::ExrExportOptions exportOptions;
     auto* level = app.add_option("--level", exportOptions.level, ".dsm -> .exr: mip level to export (default 0)")
-                      ->type_name("L");
+                      ->type_name("L")
+                      ->check(integerIn(0, kMaxMipLevel));
     auto* tiled = app.add_flag("--tiled", exportOptions.tiled,
                                ".dsm -> .exr: write a deep tiled image (default deep scanline)");
     auto* exrTile = app.add_option("--exr-tile-size", exportOptions.tileSize,
                                    ".dsm -> .exr: tile edge of a --tiled image (default 64)")
                         ->type_name("N")
-                        ->check(CLI::Range(1u, 65536u))
+                        ->check(integerIn(1, 65536))
                         ->needs(tiled);
     auto* deviation = app.add_option("--max-deviation", exportOptions.maxDeviation,
                                      ".dsm -> .exr: bound on |EXR transmittance - map visibility| from the "
-                                     "exponential reading of volume samples (default clamp(tolerance/2, 1e-5, 1e-3))")
+                                     "exponential reading of volume samples, in [1e-6, 1] (default "
+                                     "clamp(tolerance/2, 1e-5, 1e-3))")
                           ->type_name("D")
-                          ->check(CLI::PositiveNumber);
+                          ->check(finiteNumberIn(dsm::kMinExrErrorBound, 1.0));
 
     dsm::ExrImportOptions importOptions;
     auto* tolerance = app.add_option("-e,--tolerance", importOptions.tolerance,
                                      ".exr -> .dsm: compression tolerance (default: the file's dsm:tolerance, "
-                                     "else 1/256)")
+                                     "else 1/256), in [0, 1]")
                           ->type_name("E")
-                          ->check(CLI::NonNegativeNumber);
+                          ->check(finiteNumberIn(0.0, 1.0));
     auto* linear = app.add_option("--max-linear-error", importOptions.maxLinearError,
                                   ".exr -> .dsm: bound on the chords that replace exponential volume samples "
-                                  "(default clamp(tolerance/4, 1e-5, 1e-3))")
+                                  "in [1e-6, 1] (default clamp(tolerance/4, 1e-5, 1e-3))")
                        ->type_name("D")
-                       ->check(CLI::PositiveNumber);
+                       ->check(finiteNumberIn(dsm::kMinExrErrorBound, 1.0));
     std::string cameraFrom;
     auto* cameraMap = app.add_option("--camera-from", cameraFrom, ".exr -> .dsm: take the light camera of this map")
                           ->type_name("MAP.dsm");
@@ -92,13 +101,15 @@ int main(int argc, char** argv) {
     auto* ortho = app.add_option("--ortho-width", importOptions.orthoWidth,
                                  ".exr -> .dsm: orthographic light with a window this wide (light units)")
                       ->type_name("W")
-                      ->check(CLI::PositiveNumber);
+                      ->check(finiteNumberIn(0.0, kMaxLength, LowerBound::Exclusive));
     auto* mapTile = app.add_option("-t,--tile-size", importOptions.tileSize,
                                    ".exr -> .dsm: map tile edge, a power of two 2..4096 (default 32)")
-                        ->type_name("N");
+                        ->type_name("N")
+                        ->check(integerIn(2, 4096));
     auto* mips = app.add_option("-m,--mip-levels", importOptions.mipLevels,
                                 ".exr -> .dsm: mip levels, 0 = full pyramid (default), 1 = none")
-                     ->type_name("N");
+                     ->type_name("N")
+                     ->check(integerIn(0, kMaxMipLevel + 1));
     bool quiet = false;
     app.add_flag("-q,--quiet", quiet, "Print nothing on success");
     cameraMap->excludes(fov)->excludes(ortho);
@@ -124,8 +135,11 @@ int main(int argc, char** argv) {
                "error.\nDocumentation: docs/dsm-convert.md");
     if (const int status = dsm::tools::parseArguments(app, argc, argv); status >= 0) return status;
 
-    std::string inputName = input, inputPath = input, current = input;
+    std::string inputName = input == "-" ? "<stdin>" : input, inputPath = input, current = input;
     try {
+        // Before any work: an output that cannot be written or would replace an input is refused.
+        dsm::tools::checkOutputs({output}, cameraFrom.empty() ? std::vector<std::string>{input}
+                                                              : std::vector<std::string>{input, cameraFrom});
         dsm::tools::InputFile in(input);
         inputName = in.name();
         inputPath = in.path();
@@ -157,7 +171,7 @@ int main(int argc, char** argv) {
         }
     } catch (const std::exception& e) {
         // Library messages name the file they concern: the input, the output or the --camera-from map.
-        std::string what = e.what();
+        std::string what = dsm::tools::exceptionMessage(e);
         if (inputPath != input)  // standard input: name it, not its temporary copy
             for (std::size_t at; (at = what.find(inputPath)) != std::string::npos;)
                 what.replace(at, inputPath.size(), inputName);

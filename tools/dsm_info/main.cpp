@@ -29,7 +29,9 @@
 #include "dsm/map_images.h"
 #include "dsm/map_info.h"
 #include "map_json.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
+#include "option_checks.h"
 #include "tool_support.h"
 
 namespace {
@@ -69,7 +71,7 @@ bool guarded(const std::string& file, Action&& action) {
         action();
         return true;
     } catch (const std::exception& e) {
-        tools::reportError(kToolName, file, e.what());
+        tools::reportError(kToolName, file, tools::exceptionMessage(e));
     } catch (...) {
         tools::reportError(kToolName, file, "unknown error");
     }
@@ -88,7 +90,7 @@ void namingInput(const tools::InputFile& input, Action&& action) {
         for (std::size_t at = message.find(input.path()); at != std::string::npos;
              at = message.find(input.path(), at + input.name().size()))
             message.replace(at, input.path().size(), input.name());
-        throw dsm::Error(message);
+        throw dsm::Error(e.code(), message);
     }
 }
 
@@ -576,6 +578,10 @@ int verify(const Options& o) {
             namingInput(input, [&] { dsm::validate(input.path()); });
             std::cout << input.name() << ": OK\n";
         });
+        if (argument != "-")
+            for (const std::string& stale : dsm::staleTemporaries(argument))
+                std::cout << name << ": note: '" << stale
+                          << "' is a temporary file left by an interrupted write over a day ago; it may be deleted\n";
     }
     return allOk ? tools::kExitOk : tools::kExitFailure;
 }
@@ -585,7 +591,11 @@ int writePicture(const Options& o) {
     const std::string& argument = o.files.front();
     const std::string name = argument == "-" ? "<stdin>" : argument;
     bool keepsFloats = false;
-    if (!guarded(o.output, [&] { keepsFloats = dsm::imageFormatKeepsFloats(o.output); })) return tools::kExitFailure;
+    const bool writable = guarded(o.output, [&] {
+        tools::checkOutputs({o.output}, {argument});  // before the picture is computed
+        keepsFloats = dsm::imageFormatKeepsFloats(o.output);
+    });
+    if (!writable) return tools::kExitFailure;
 
     const unsigned level = o.level.value_or(0);
     dsm::FloatImage image;
@@ -646,7 +656,8 @@ int main(int argc, char** argv) {
     auto* level = app.add_option("--level", levelValue,
                                  "Mip level for --pixel and the pictures (default 0); limits --tiles and --stats "
                                  "to that level")
-                      ->type_name("L");
+                      ->type_name("L")
+                      ->check(tools::integerIn(0, UINT32_MAX));
     auto* verifyFlag = app.add_flag("--verify", o.verify,
                                     "Check every tile of every file (CRC-32, layout, function invariants) and print "
                                     "'FILE: OK' or the error instead of describing the files");
@@ -703,7 +714,7 @@ int main(int argc, char** argv) {
         else if (o.picture != Picture::None) status = writePicture(o);
         else status = describe(o);
     } catch (const std::exception& e) {
-        std::cerr << tools::errorLine(kToolName, "", e.what()) << '\n';
+        std::cerr << tools::errorLine(kToolName, "", tools::exceptionMessage(e)) << '\n';
         return tools::kExitFailure;
     }
     std::cout.flush();

@@ -36,6 +36,8 @@
 #include "dsm/reader.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
+#include "query_line.h"
+#include "option_checks.h"
 #include "tool_support.h"
 
 namespace {
@@ -44,8 +46,6 @@ using namespace dsm::tools;
 
 constexpr const char* kToolName = "dsm-lookup";
 constexpr const char* kDocumentation = "docs/dsm-lookup.md";
-/// Longer lines are reported as bad rather than held in memory whole.
-constexpr std::size_t kMaxLineBytes = 4096;
 /// The process-wide cache's budget (tile_cache.h), used unless --cache-mb says otherwise.
 constexpr double kDefaultCacheMiB = 256.0;
 /// Keeps the byte count well inside size_t.
@@ -53,12 +53,17 @@ constexpr double kMaxCacheMiB = 1024.0 * 1024.0;
 /// The widest map a reader accepts (ReaderOptions::maxWidth): a wider filter
 /// only costs time, and an unbounded one would make a lookup loop for ages.
 constexpr double kMaxFilterWidth = 131072.0;
+/// Depths and thresholds in light units: any finite scene fits well inside.
+constexpr double kMaxLength = 1e30;
 /// Light samples per soft query: a bound keeps one query's time finite
 /// (256 samples already put the estimate's noise below 1/32).
 constexpr int kMaxLightSamples = 65536;
 
 enum class Space { World, Light, Raster };
 enum class Format { Csv, Json };
+/// Where the complaint about a bad query goes (--errors): standard error, the
+/// answer stream (so a client reading one pipe sees everything), or nowhere.
+enum class ErrorReport { Stderr, Inline, Quiet };
 
 struct Options {
     std::string map;
@@ -74,6 +79,7 @@ struct Options {
     bool errorBound = false;
     bool strict = false;
     bool stats = false;
+    std::string errors = "stderr";
     double cacheMiB = kDefaultCacheMiB;
     // Soft shadows (--area-light); the rest apply only with it.
     std::string areaLight;  ///< empty: point lookups
@@ -90,69 +96,7 @@ struct UsageError : std::runtime_error {
 };
 
 // ---------------------------------------------------------------------------
-// Parsing numbers and query lines (the line format is the tool's, not libdsm's)
-
-/// Makes a piece of input safe to quote in a one-line message.
-std::string quotedInput(std::string_view text) {
-    constexpr std::size_t kMaxShown = 32;
-    std::string out = "'";
-    for (std::size_t i = 0; i < text.size() && i < kMaxShown; ++i) {
-        const auto c = static_cast<unsigned char>(text[i]);
-        out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-    }
-    if (text.size() > kMaxShown) out += "...";
-    return out + "'";
-}
-
-/// A finite decimal number filling all of `text` (a leading '+' allowed), or
-/// nothing.
-std::optional<double> parseNumber(std::string_view text) {
-    if (!text.empty() && text.front() == '+') text.remove_prefix(1);
-    double value = 0.0;
-    const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), value);
-    if (error != std::errc() || end != text.data() + text.size() || !std::isfinite(value)) return std::nullopt;
-    return value;
-}
-
-/// What one input line holds: nothing to answer (blank or comment), a point,
-/// or a complaint about it.
-struct ParsedLine {
-    enum class Kind { Skip, Point, Bad } kind = Kind::Skip;
-    std::array<double, 3> point{};
-    std::string problem;
-};
-
-/// "x y z": three finite numbers separated by spaces, tabs or commas; '#'
-/// starts a comment that runs to the end of the line.
-ParsedLine parseQueryLine(std::string_view line) {
-    ParsedLine result;
-    if (const auto hash = line.find('#'); hash != std::string_view::npos) line = line.substr(0, hash);
-    const auto isSeparator = [](char c) { return c == ' ' || c == '\t' || c == ',' || c == '\r'; };
-    std::vector<std::string_view> fields;
-    std::size_t i = 0;
-    while (i < line.size()) {
-        while (i < line.size() && isSeparator(line[i])) ++i;
-        const std::size_t start = i;
-        while (i < line.size() && !isSeparator(line[i])) ++i;
-        if (i > start) fields.push_back(line.substr(start, i - start));
-    }
-    if (fields.empty()) return result;
-    result.kind = ParsedLine::Kind::Bad;
-    if (fields.size() != 3) {
-        result.problem = "expected 3 numbers (x y z), found " + std::to_string(fields.size()) + " fields";
-        return result;
-    }
-    for (std::size_t k = 0; k < 3; ++k) {
-        const std::optional<double> value = parseNumber(fields[k]);
-        if (!value) {
-            result.problem = std::string("xyz").substr(k, 1) + " " + quotedInput(fields[k]) + " is not a finite number";
-            return result;
-        }
-        result.point[k] = *value;
-    }
-    result.kind = ParsedLine::Kind::Point;
-    return result;
-}
+// Parsing arguments (query lines: query_line.h)
 
 /// --area-light disk:R or rect:W,H, through the library's parser.
 dsm::AreaLightSize parseAreaLight(const std::string& text) {
@@ -171,37 +115,6 @@ std::array<double, 3> parsePointArgument(const std::string& text) {
         throw UsageError("--point " + quotedInput(text) + ": expected three finite numbers X,Y,Z");
     return parsed.point;
 }
-
-/// Reads lines of at most kMaxLineBytes; longer ones are consumed to their end
-/// and flagged. Reads the stream buffer directly: a line is answered as soon as
-/// its newline arrives, whatever follows.
-class LineReader {
-public:
-    explicit LineReader(std::streambuf& in) : in_(in) {}
-
-    /// False at the end of the input. `tooLong` is set for an overlong line,
-    /// of which `line` holds the start.
-    bool next(std::string& line, bool& tooLong) {
-        line.clear();
-        tooLong = false;
-        bool any = false;
-        for (;;) {
-            const int c = in_.sbumpc();
-            if (c == std::char_traits<char>::eof()) return any;
-            any = true;
-            if (c == '\n') return true;
-            if (line.size() < kMaxLineBytes) line.push_back(static_cast<char>(c));
-            else tooLong = true;
-        }
-    }
-
-    /// True when the next character can be read without waiting: the caller
-    /// flushes its answers before a read that may block.
-    bool inputWaiting() { return in_.in_avail() > 0; }
-
-private:
-    std::streambuf& in_;
-};
 
 // ---------------------------------------------------------------------------
 // Query modes: how a point becomes an answer.
@@ -303,13 +216,18 @@ enum class Details { None, Traced, Pcf };
 /// Prints one answer line per query, buffered; flush() hands them over.
 class AnswerWriter {
 public:
-    AnswerWriter(Format format, int channels, bool errorBound, Details details = Details::None)
-        : format_(format), channels_(channels), errorBound_(errorBound), details_(details) {}
+    /// `errorColumn`: CSV rows end in an error column (--errors inline),
+    /// empty for an answer.
+    AnswerWriter(Format format, int channels, bool errorBound, Details details = Details::None,
+                 bool errorColumn = false)
+        : format_(format), channels_(channels), errorBound_(errorBound), details_(details),
+          errorColumn_(errorColumn && format == Format::Csv) {}
 
     void header() {
         if (format_ != Format::Csv) return;
         text_ += channels_ == 3 ? "r,g,b" : "v";
         if (errorBound_) text_ += ",error_bound";
+        if (errorColumn_) text_ += ",error";
         text_ += '\n';
     }
 
@@ -319,6 +237,7 @@ public:
             text_ += number(a.v[0]);
             if (channels_ == 3) text_ += "," + number(a.v[1]) + "," + number(a.v[2]);
             if (errorBound_) text_ += "," + number(a.errorBound);
+            if (errorColumn_) text_ += ',';
         } else {
             text_ += "{\"" + std::string(key) + "\":" + std::to_string(index);
             if (channels_ == 3)
@@ -338,11 +257,14 @@ public:
     }
 
     /// The placeholder that keeps answers aligned with queries: nan in every
-    /// CSV column, or {"line":N,"error":"..."} (`key` as for answer()).
+    /// CSV column (and "<key> N: problem" in the error column), or
+    /// {"line":N,"error":"..."} (`key` as for answer()).
     void bad(const char* key, std::uint64_t index, const std::string& problem) {
         if (format_ == Format::Csv) {
             const int columns = (channels_ == 3 ? 3 : 1) + (errorBound_ ? 1 : 0);
             for (int c = 0; c < columns; ++c) text_ += c ? ",nan" : "nan";
+            if (errorColumn_) text_ += "," + csvQuoted(oneLine(std::string(key) + " " + std::to_string(index) + ": " +
+                                                               problem));
         } else {
             const nlohmann::json message = problem;
             text_ += "{\"" + std::string(key) + "\":" + std::to_string(index) + ",\"error\":" +
@@ -362,10 +284,18 @@ public:
     }
 
 private:
+    /// A CSV field in double quotes, inner quotes doubled.
+    static std::string csvQuoted(const std::string& text) {
+        std::string out = "\"";
+        for (char c : text) out += c == '"' ? std::string("\"\"") : std::string(1, c);
+        return out + '"';
+    }
+
     Format format_;
     int channels_;
     bool errorBound_;
     Details details_;
+    bool errorColumn_;
     std::string text_;
 };
 
@@ -410,9 +340,8 @@ public:
                 ++totals.bad;
                 writer_.bad("point", k + 1, *problem);
                 if (!writer_.flush()) return Stop::OutputError;
-                std::cerr << oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(k + 1) + ": " +
-                                     *problem)
-                          << '\n';
+                complain(oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(k + 1) + ": " +
+                                 *problem));
                 if (options_.strict) return Stop::Strict;
             }
         }
@@ -446,7 +375,7 @@ public:
             // The answer line goes out before the complaint, so a reader of
             // both streams sees them in order.
             if (!writer_.flush()) return Stop::OutputError;
-            std::cerr << lineError(inputName, lineNumber, *problem) << '\n';
+            complain(lineError(inputName, lineNumber, *problem));
             if (options_.strict) return Stop::Strict;
         }
         return writer_.flush() ? Stop::None : Stop::OutputError;
@@ -455,6 +384,12 @@ public:
     Totals totals;
 
 private:
+    /// A bad query's error line, on standard error with --errors stderr only
+    /// (inline put it in the answer already; quiet drops it).
+    void complain(const std::string& line) const {
+        if (options_.errors == "stderr") std::cerr << line << '\n';
+    }
+
     const Options& options_;
     std::string mapPath_;
     QueryMode& mode_;
@@ -528,7 +463,6 @@ void checkSoftOptions(const CLI::App& app, const Options& o) {
     if (o.soft == "pcf")
         for (const char* name : {"--light-samples", "--layers", "--seed"})
             if (given(name)) throw UsageError(std::string(name) + " does not apply to --soft pcf");
-    if (!std::isfinite(o.zThreshold)) throw UsageError("--z-threshold: expected a finite number");
 }
 
 int run(const Options& o, const std::vector<std::array<double, 3>>& points, int level) {
@@ -546,14 +480,20 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         readerOptions.cache = dsm::TileCache::create(static_cast<std::size_t>(o.cacheMiB * 1024.0 * 1024.0));
         map = dsm::DeepShadowMap::open(mapFile->path(), readerOptions);
     } catch (const std::exception& e) {
-        if (!mapFile) reportError(kToolName, o.map, e.what());
-        else reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+        if (!mapFile) reportError(kToolName, o.map == "-" ? "<stdin>" : o.map, exceptionMessage(e));
+        else reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
         return kExitFailure;
     }
     if (!o.input.empty() && o.input != "-") {
         std::error_code ignored;
         if (std::filesystem::is_directory(o.input, ignored)) {
             reportError(kToolName, o.input, "is a directory");
+            return kExitFailure;
+        }
+        try {
+            requireRegularFile(o.input);  // a FIFO would block the open; standard input is "-"
+        } catch (const dsm::Error& e) {
+            reportError(kToolName, o.input, e.what());
             return kExitFailure;
         }
         inputFile.open(o.input, std::ios::binary);
@@ -582,7 +522,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
             const dsm::AreaLight light = dsm::AreaLight::forMap(map->info(), size);
             tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
         } catch (const std::exception& e) {
-            reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+            reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
             return kExitFailure;
         }
         dsm::SoftShadowOptions shadow;
@@ -598,7 +538,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         mode = std::move(query);
     }
     AnswerWriter writer(o.format == "json" ? Format::Json : Format::Csv, map->info().channels, o.errorBound,
-                        details);
+                        details, /*errorColumn=*/o.errors == "inline");
     Session session(o, map->path(), *mode, writer);
 
     const auto start = std::chrono::steady_clock::now();
@@ -610,7 +550,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
             stop = session.lines(queriesFromStdin ? *std::cin.rdbuf() : *inputFile.rdbuf(), inputName);
     } catch (const std::exception& e) {
         writer.flush();
-        reportError(kToolName, mapFile->name(), mapMessage(e.what(), *mapFile));
+        reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
         stop = Stop::MapError;
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
@@ -649,7 +589,7 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"world", "light", "raster"}))
         ->capture_default_str();
     app.add_option("-w,--filter-width", o.filterWidth, "Filter width in level-0 pixels")
-        ->check(CLI::NonNegativeNumber)
+        ->check(finiteNumberIn(0.0, kMaxFilterWidth))
         ->capture_default_str();
     app.add_option("-f,--filter", o.filter, "Lookup filter")
         ->check(CLI::IsMember({"box", "triangle", "gaussian"}))
@@ -667,9 +607,15 @@ int main(int argc, char** argv) {
     app.add_flag("--header", o.header, "Print a CSV header line first (csv only)");
     app.add_flag("-e,--error-bound", o.errorBound, "Add each answer's compression error bound");
     app.add_flag("--strict", o.strict, "Stop at the first bad line (exit status 1)");
+    app.add_option("--errors", o.errors,
+                   "Where bad queries are reported: stderr (one line each), inline (in the answer stream: CSV rows "
+                   "gain an error column, JSON answers carry \"error\"; nothing on standard error) or quiet "
+                   "(only the placeholder answer)")
+        ->check(CLI::IsMember({"stderr", "inline", "quiet"}))
+        ->capture_default_str();
     app.add_flag("--stats", o.stats, "Print throughput and tile-cache statistics to standard error at the end");
     app.add_option("--cache-mb", o.cacheMiB, "Tile cache budget in MiB")
-        ->check(CLI::NonNegativeNumber)
+        ->check(finiteNumberIn(0.0, kMaxCacheMiB))
         ->type_name("MIB")
         ->capture_default_str();
     app.add_option("--area-light", o.areaLight,
@@ -681,20 +627,15 @@ int main(int argc, char** argv) {
         ->type_name("N")
         ->capture_default_str();
     app.add_option("--layers", o.layers, "Map layers a soft query uses (0 = all)")
-        ->check(CLI::NonNegativeNumber)
+        ->check(integerIn(0, 255))
         ->type_name("K")
         ->capture_default_str();
     app.add_option("--z-threshold", o.zThreshold, "Depth tolerance of a ray hitting a stored sample (light units)")
-        ->check(CLI::NonNegativeNumber)
+        ->check(finiteNumberIn(0.0, kMaxLength))
         ->type_name("Z")
         ->capture_default_str();
     app.add_option("--seed", o.seed, "Seed of the light samples (a non-negative integer)")
-        ->check(CLI::Validator(
-            // CLI11 would wrap "-1" around to a huge unsigned number.
-            [](std::string& text) {
-                return text.find('-') == std::string::npos ? std::string() : "expects a non-negative integer";
-            },
-            "NONNEGATIVE", "non-negative"))
+        ->check(integerIn(0, UINT64_MAX))
         ->capture_default_str();
     app.add_option("--soft", o.soft, "Soft-shadow method: mtsm (ray tracing the map) or pcf (the PCF baseline)")
         ->check(CLI::IsMember({"mtsm", "pcf"}))
@@ -710,9 +651,6 @@ int main(int argc, char** argv) {
     std::vector<std::array<double, 3>> points;
     try {
         if (!std::isfinite(o.bias)) throw UsageError("--bias: expected a finite number");
-        if (!(o.filterWidth <= kMaxFilterWidth))
-            throw UsageError("--filter-width: at most " + number(kMaxFilterWidth) + " pixels");
-        if (o.cacheMiB > kMaxCacheMiB) throw UsageError("--cache-mb: at most " + number(kMaxCacheMiB) + " MiB");
         if (o.header && o.format != "csv") throw UsageError("--header applies to --format csv only");
         level = levelFromText(o.level);
         for (const std::string& p : o.points) points.push_back(parsePointArgument(p));
@@ -729,7 +667,7 @@ int main(int argc, char** argv) {
         return kExitUsage;
     } catch (const std::exception& e) {
         std::cout.flush();
-        std::cerr << oneLine(std::string(kToolName) + ": ERROR: " + e.what()) << '\n';
+        std::cerr << oneLine(std::string(kToolName) + ": ERROR: " + exceptionMessage(e)) << '\n';
         return kExitFailure;
     }
 }

@@ -12,6 +12,7 @@
 
 #include "dsm/error.h"
 #include "dsm/merge.h"
+#include "option_checks.h"
 #include "tool_support.h"
 
 namespace {
@@ -44,11 +45,11 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"product", "stitch"}))
         ->capture_default_str();
     app.add_option("-e,--tolerance", tolerance,
-                   "Product: recompression tolerance >= 0 (default: the largest level-0 tolerance of the inputs)")
-        ->check(CLI::Range(0.0, 1e300));
+                   "Product: recompression tolerance in [0, 1] (default: the largest level-0 tolerance of the inputs)")
+        ->check(finiteNumberIn(0.0, 1.0));
     app.add_option("-z,--zlib-level", zlibLevel,
                    "zlib level 0..9 (default: product 6; stitch the inputs' level, found from their tiles)")
-        ->check(CLI::Range(0, 9));
+        ->check(integerIn(0, 9));
     app.add_flag("-q,--quiet", quiet, "Print nothing on success");
     if (const int status = parseArguments(app, argc, argv); status >= 0) return status;
     if (mode == "stitch" && app.count("--tolerance")) {
@@ -79,7 +80,7 @@ int main(int argc, char** argv) {
                           << " (interpolation " << r.interpolationError << ") + recompression\n";
         }
     } catch (const std::exception& e) {
-        const std::string message = e.what();
+        const std::string message = exceptionMessage(e);
         reportError(kToolName, fileNamedBy(message, files), message);
         return kExitFailure;
     }

@@ -17,6 +17,9 @@
 #include "dsm/compressor.h"
 #include "dsm/error.h"
 #include "dsm/names.h"
+#include "dsm/output_file.h"
+#include "dsm/reader.h"
+#include "dsm/threads.h"
 #include "dsm/writer.h"
 #include "light_rays.h"
 #include "pixel_filter.h"
@@ -65,6 +68,33 @@ struct TileStats {
 
 }  // namespace
 
+BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
+    BuildEstimate e;
+    e.width = options.width ? options.width : scene.light.width;
+    e.height = options.height ? options.height : scene.light.height;
+    const auto& r = options.region;
+    const bool whole = r == std::array<std::uint32_t, 4>{0, 0, 0, 0} || r[0] >= r[2] || r[1] >= r[3];
+    e.pixels = whole ? std::uint64_t(e.width) * e.height : std::uint64_t(r[2] - r[0]) * (r[3] - r[1]);
+    e.sampleRays = e.pixels * options.samplesPerPixel;
+    // A few vertices per pixel: an assumption, real scenes vary widely.
+    const int channels = scene.isColoured() ? 3 : 1;
+    constexpr std::uint64_t kTypicalVertices = 4;
+    const std::uint64_t perPixel = sizeof(VisibilityFunction) + kTypicalVertices * (4 + 4 * std::uint64_t(channels));
+    const std::uint64_t tile = std::max<std::uint32_t>(1, options.tileSize);
+    std::uint64_t directory = 0;
+    for (std::uint64_t w = e.width, h = e.height;; w = (w + 1) / 2, h = (h + 1) / 2) {
+        directory += ((w + tile - 1) / tile) * ((h + tile - 1) / tile) * (sizeof(TileSummary) + 1);
+        if (w == 1 && h == 1) break;
+    }
+    const std::uint64_t row = std::uint64_t(e.width) * tile * perPixel;
+    const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * options.filterWidth - 0.5)));
+    const std::uint64_t samplePixels = (tile + 2 * reach) * (tile + 2 * reach);
+    const std::uint64_t samples = std::uint64_t(usableThreads(options.threads)) * samplePixels *
+                                  options.samplesPerPixel * (sizeof(SampleData) + 2 * sizeof(SurfaceHit));
+    e.memoryBytes = directory + 2 * row + samples;
+    return e;
+}
+
 BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
     const auto wallStart = Clock::now();
     LightDescription light = scene.light;
@@ -72,6 +102,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     if (options.height) light.height = options.height;
     const std::uint32_t W = light.width, H = light.height;
     const std::string where = concat("build '", path, "'");
+    checkOutputPath(path);  // before the work, not after it
     if (W == 0 || H == 0) throw Error(concat(where, ": resolution ", W, "x", H, " is empty"));
     if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
         throw Error(concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
@@ -240,7 +271,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     BuildStats result;
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
-    tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic : static_cast<int>(options.threads));
+    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads)));
     std::vector<std::vector<VisibilityFunction>> rowTiles(tilesX);
     std::vector<TileStats> rowStats(tilesX);
     for (std::uint32_t ty = 0; ty < tilesY; ++ty) {

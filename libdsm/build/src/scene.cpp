@@ -9,7 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
-#include <iterator>
+#include <istream>
 #include <limits>
 #include <set>
 #include <string>
@@ -43,6 +43,24 @@ using detail::normalized;
 using detail::scale;
 using detail::sub;
 
+// The ranges of spec/scene.md §1.1. They are far wider than any real scene
+// needs and narrow enough that every sum, product and square the ray caster
+// forms from them stays finite, and that float storage keeps them.
+constexpr double kMaxCoordinate = 1e12;  // positions, points, lengths, translations
+constexpr double kMinLength = 1e-12;     // the shortest positive length
+constexpr double kMaxLinear = 1e6;       // scale factors, entries of a transform's 3x3 part
+constexpr double kMinDeterminant = 1e-18;  // of a transform's 3x3 part: factors >= 1e-6
+constexpr double kMaxAngle = 1e6;          // degrees
+constexpr double kMaxDensity = 1e12;       // densities and extinction scales
+constexpr double kMaxCurl = 1e6;           // radians per unit length
+constexpr double kMaxFrequency = 1e6;      // noise features per unit length
+constexpr double kMinFieldOfView = 1e-3;   // degrees
+/// Samples a ray may take across one volume's box (its longest diagonal / step).
+constexpr double kMaxVolumeSamples = 1e6;
+constexpr std::uint64_t kMaxHairBallCount = 10'000'000;
+constexpr std::uint64_t kMaxHairBallSegments = 1000;
+constexpr std::uint64_t kMaxHairBallPoints = 100'000'000;
+
 using Mat4 = std::array<double, 16>;
 constexpr Mat4 kIdentity{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
 
@@ -62,23 +80,64 @@ class SceneRandom : public detail::SplitMix64 {
 public:
     using SplitMix64::SplitMix64;
     /// Uniform on the unit sphere, by rejection from the cube (no libm calls
-    /// but sqrt, which IEEE 754 rounds exactly).
+    /// but sqrt, which IEEE 754 rounds exactly). A draw is accepted with
+    /// probability ~0.52; the bound on draws (never reached: 0.48^1000) keeps
+    /// the loop finite whatever the generator does.
     Vec3 unitVector() {
-        for (;;) {
+        for (int draw = 0; draw < kMaxDraws; ++draw) {
             const Vec3 v{2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0, 2.0 * uniform() - 1.0};
             const double s = dot(v, v);
             if (s > 1e-6 && s <= 1.0) return scale(v, 1.0 / std::sqrt(s));
         }
+        return {0.0, 0.0, 1.0};
     }
+
+    static constexpr int kMaxDraws = 1000;
 };
 
 // ---------------------------------------------------------------------------
 // JSON helpers. Every message names the scene and a JSON pointer.
 
+// One token of a JSON pointer (RFC 6901: "~" is "~0", "/" is "~1"), clipped
+// for messages.
+std::string pointerToken(std::string_view key) {
+    std::string token;
+    for (const char c : key.substr(0, 2 * detail::kMaxQuotedChars)) {
+        if (c == '~') token += "~0";
+        else if (c == '/') token += "~1";
+        else token += c;
+    }
+    return detail::clip(key.size() > 2 * detail::kMaxQuotedChars ? token + "..." : token);
+}
+
+// Appends a compact rendering of v (as json::dump writes it) to out, stopping
+// soon after out passes `limit` characters: a 100 MB value costs no more than
+// a short one.
+void describeInto(const json& v, std::string& out, std::size_t limit) {
+    if (v.is_string()) {
+        out += json(detail::clip(v.get_ref<const std::string&>(), limit)).dump(-1, ' ', false,
+                                                                               json::error_handler_t::replace);
+    } else if (v.is_array() || v.is_object()) {
+        out += v.is_array() ? '[' : '{';
+        bool first = true;
+        for (auto it = v.begin(); it != v.end(); ++it) {
+            if (out.size() > limit) return;
+            if (!first) out += ',';
+            first = false;
+            if (v.is_object()) out += json(detail::clip(it.key(), limit)).dump(-1, ' ', false,
+                                                                             json::error_handler_t::replace) + ":";
+            describeInto(*it, out, limit);  // depth is bounded by kMaxSceneNesting
+        }
+        out += v.is_array() ? ']' : '}';
+    } else {
+        out += v.dump();
+    }
+}
+
 std::string describe(const json& v) {
-    std::string s = v.dump(-1, ' ', false, json::error_handler_t::replace);
-    if (s.size() > 60) s = s.substr(0, 57) + "...";
-    return s;
+    std::string s;
+    describeInto(v, s, detail::kMaxQuotedChars);
+    return detail::clip(s);
 }
 
 std::string formatNumber(double x) { return detail::concat(x); }
@@ -99,17 +158,45 @@ struct Range {
         return "";
     }
 };
-const Range kAny{};
-const Range kPositive{0.0, std::numeric_limits<double>::infinity(), true, false};
-const Range kNonNegative{0.0, std::numeric_limits<double>::infinity(), false, false};
-const Range kUnit{0.0, 1.0, false, false};
+const Range kCoordinate{-kMaxCoordinate, kMaxCoordinate};
+const Range kLength{kMinLength, kMaxCoordinate};
+const Range kNonNegativeLength{0.0, kMaxCoordinate};
+const Range kUnit{0.0, 1.0};
+const Range kDensityRange{0.0, kMaxDensity};
+const Range kAngle{-kMaxAngle, kMaxAngle};
+const Range kLinear{-kMaxLinear, kMaxLinear};
+const Range kCurl{0.0, kMaxCurl};
+const Range kFrequency{kMinLength, kMaxFrequency};
+const Range kFieldOfView{kMinFieldOfView, 180.0, false, true};
+
+std::string inText(const Range& range) {
+    const std::string t = range.text();
+    return (t[0] == '[' || t[0] == '(') ? "in " + t : t;
+}
 
 class Parser {
 public:
-    Parser(std::string name, std::string baseDirectory) : name_(std::move(name)), base_(std::move(baseDirectory)) {}
+    Parser(std::string name, std::string baseDirectory, std::uint64_t maxHairPoints)
+        : name_(std::move(name)), base_(std::move(baseDirectory)), maxHairPoints_(maxHairPoints) {}
 
-    [[noreturn]] void fail(const std::string& path, const std::string& message) const {
-        throw Error(detail::concat("scene '", name_, "': ", path.empty() ? std::string() : path + ": ", message));
+    /// Counts `points` more generated hair points against
+    /// SceneReadOptions::maxHairPoints before they are generated.
+    void addHairPoints(const std::string& path, std::uint64_t points) const {
+        if (points > maxHairPoints_ - std::min(hairPoints_, maxHairPoints_))
+            fail(path, detail::concat(points, " hair points would bring the scene's hair balls to ",
+                                      hairPoints_ + points, ", more than the limit of ", maxHairPoints_),
+                 ErrorCode::limit);
+        hairPoints_ += points;
+    }
+
+    [[noreturn]] void fail(const std::string& path, const std::string& message,
+                           ErrorCode code = ErrorCode::scene) const {
+        // A pointer through 64 levels of long keys could still be long: it
+        // is cut like any other quoted text.
+        throw Error(code, detail::concat(
+                              "scene '", detail::clip(name_, detail::kMaxQuotedPath),
+                              "': ", path.empty() ? std::string() : detail::clip(path, detail::kMaxQuotedPath) + ": ",
+                              message));
     }
     [[noreturn]] void expected(const std::string& path, const std::string& what, const json& got) const {
         fail(path, "expected " + what + ", got " + describe(got));
@@ -137,7 +224,8 @@ public:
                 if (!list.empty()) list += ", ";
                 list += a;
             }
-            fail(path + "/" + key, "unknown key \"" + key + "\"" + context + " (allowed here: " + list + ")");
+            fail(path + "/" + pointerToken(key),
+                 "unknown key \"" + detail::clip(key) + "\"" + context + " (allowed here: " + list + ")");
         }
     }
 
@@ -151,20 +239,19 @@ public:
         return *v;
     }
 
-    double number(const json& v, const std::string& path, const Range& range = kAny) const {
-        const std::string what = range.text().empty() ? "a number" : "a number " + inText(range);
+    double number(const json& v, const std::string& path, const Range& range) const {
+        const std::string what = "a number " + inText(range);
         if (!v.is_number()) expected(path, what, v);
         const double x = v.get<double>();
         if (!std::isfinite(x) || !range.contains(x)) expected(path, what, v);
         return x;
     }
     double number(const json& object, const std::string& path, const char* key, double fallback,
-                  const Range& range = kAny) const {
+                  const Range& range) const {
         const json* v = find(object, key);
         return v ? number(*v, path + "/" + key, range) : fallback;
     }
-    double requiredNumber(const json& object, const std::string& path, const char* key,
-                          const Range& range = kAny) const {
+    double requiredNumber(const json& object, const std::string& path, const char* key, const Range& range) const {
         return number(require(object, path, key), path + "/" + key, range);
     }
 
@@ -202,8 +289,8 @@ public:
         return v.get<std::string>();
     }
 
-    Vec3 vec3(const json& v, const std::string& path, const Range& range = kAny) const {
-        const std::string what = range.text().empty() ? "[x, y, z] (3 numbers)" : "3 numbers " + inText(range);
+    Vec3 vec3(const json& v, const std::string& path, const Range& range = kCoordinate) const {
+        const std::string what = "[x, y, z] (3 numbers " + inText(range) + ")";
         if (!v.is_array() || v.size() != 3) expected(path, what, v);
         Vec3 out{};
         for (std::size_t i = 0; i < 3; ++i) {
@@ -217,9 +304,12 @@ public:
         const json* v = find(object, key);
         return v ? vec3(*v, path + "/" + key) : fallback;
     }
+    /// A direction or half-axis: coordinates in range and a length of at least
+    /// kMinLength, so that normalising it is exact enough and finite.
     Vec3 nonZeroVec3(const json& v, const std::string& path) const {
         const Vec3 out = vec3(v, path);
-        if (!(length(out) > 0.0) || !std::isfinite(length(out))) expected(path, "a non-zero vector [x, y, z]", v);
+        if (!(length(out) >= kMinLength))
+            expected(path, "a non-zero vector [x, y, z] (length >= " + formatNumber(kMinLength) + ")", v);
         return out;
     }
 
@@ -230,10 +320,7 @@ public:
         out.reserve(v.size());
         for (std::size_t i = 0; i < v.size(); ++i) {
             const Vec3 p = vec3(v[i], detail::concat(path, "/", i));
-            const std::array<float, 3> f{static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])};
-            if (!std::isfinite(f[0]) || !std::isfinite(f[1]) || !std::isfinite(f[2]))
-                expected(detail::concat(path, "/", i), "coordinates within float range", v[i]);
-            out.push_back(f);
+            out.push_back({static_cast<float>(p[0]), static_cast<float>(p[1]), static_cast<float>(p[2])});
         }
         return out;
     }
@@ -241,13 +328,11 @@ public:
     const std::string& name() const { return name_; }
 
 private:
-    static std::string inText(const Range& range) {
-        const std::string t = range.text();
-        return (t[0] == '[' || t[0] == '(') ? "in " + t : t;
-    }
-
     std::string name_;
     std::string base_;
+    std::uint64_t maxHairPoints_;
+    /// Points the hair balls parsed so far generate (the parser is const).
+    mutable std::uint64_t hairPoints_ = 0;
 };
 
 // ---------------------------------------------------------------------------
@@ -297,10 +382,10 @@ LightDescription parseLight(const Parser& p, const json& v) {
     }
 
     if (light.projection == Projection::Perspective) {
-        light.fieldOfViewDegrees = p.number(v, path, "fov", 45.0, Range{0.0, 180.0, true, true});
-        light.areaLightRadius = p.number(v, path, "area_radius", 0.0, kNonNegative);
+        light.fieldOfViewDegrees = p.number(v, path, "fov", 45.0, kFieldOfView);
+        light.areaLightRadius = p.number(v, path, "area_radius", 0.0, kNonNegativeLength);
     } else {
-        light.extent = p.requiredNumber(v, path, "extent", kPositive);
+        light.extent = p.requiredNumber(v, path, "extent", kLength);
     }
 
     light.width = light.height = 512;
@@ -315,7 +400,13 @@ LightDescription parseLight(const Parser& p, const json& v) {
             p.expected(rpath, detail::concat("[width, height] or one size, integers in [1, ", kMaxResolution, "]"), *r);
         }
     }
-    light.nearPlane = p.number(v, path, "near", 0.0, kNonNegative);
+    light.nearPlane = p.number(v, path, "near", 0.0, kNonNegativeLength);
+    // The ranges above keep the camera finite; this catches what they miss.
+    try {
+        lightCamera(light);
+    } catch (const Error& e) {
+        p.fail(path, e.what());
+    }
     return light;
 }
 
@@ -342,12 +433,17 @@ Mat4 parseTrs(const Parser& p, const json& v, const std::string& path) {
         const std::string spath = path + "/scale";
         Vec3 f{};
         if (sv->is_number()) {
-            const double x = p.number(*sv, spath);
+            const double x = p.number(*sv, spath, kLinear);
             f = {x, x, x};
         } else {
-            f = p.vec3(*sv, spath);
+            f = p.vec3(*sv, spath, kLinear);
         }
-        if (f[0] == 0.0 || f[1] == 0.0 || f[2] == 0.0) p.expected(spath, "non-zero scale factors", *sv);
+        const double smallest = std::min({std::abs(f[0]), std::abs(f[1]), std::abs(f[2])});
+        if (!(smallest >= 1.0 / kMaxLinear))
+            p.expected(spath,
+                       "scale factors with magnitudes in [" + formatNumber(1.0 / kMaxLinear) + ", " +
+                           formatNumber(kMaxLinear) + "] (negative factors mirror)",
+                       *sv);
         s[0] = f[0];
         s[5] = f[1];
         s[10] = f[2];
@@ -357,7 +453,7 @@ Mat4 parseTrs(const Parser& p, const json& v, const std::string& path) {
         p.requireObject(*rv, rpath, "{\"axis\": [x, y, z], \"angle\": degrees}");
         p.checkKeys(*rv, rpath, {"axis", "angle"});
         const Vec3 axis = p.nonZeroVec3(p.require(*rv, rpath, "axis"), rpath + "/axis");
-        const double angle = p.requiredNumber(*rv, rpath, "angle");
+        const double angle = p.requiredNumber(*rv, rpath, "angle", kAngle);
         r = rotation(axis, angle);
     }
     if (const json* tv = Parser::find(v, "translate")) {
@@ -369,24 +465,43 @@ Mat4 parseTrs(const Parser& p, const json& v, const std::string& path) {
     return multiply(t, multiply(r, s));
 }
 
+// The bounds of spec/scene.md §4.3 on a whole transform: the 3x3 part's
+// entries and determinant and the translation, so that objects, their
+// inverse transforms and the world stay finite.
+void checkTransform(const Parser& p, const Mat4& m, const std::string& path) {
+    for (std::size_t r = 0; r < 3; ++r) {
+        for (std::size_t c = 0; c < 3; ++c)
+            if (!(std::abs(m[4 * r + c]) <= kMaxLinear))
+                p.fail(path, detail::concat("the transform's 3x3 part has an entry ", m[4 * r + c], " beyond +-",
+                                            kMaxLinear));
+        if (!(std::abs(m[4 * r + 3]) <= kMaxCoordinate))
+            p.fail(path, detail::concat("the transform translates by ", m[4 * r + 3], ", beyond +-", kMaxCoordinate));
+    }
+    const double det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
+                       m[2] * (m[4] * m[9] - m[5] * m[8]);
+    if (!(std::abs(det) >= kMinDeterminant))
+        p.fail(path, detail::concat("the transform is singular or nearly so (the determinant of its 3x3 part is ", det,
+                                    "; at least ", kMinDeterminant, " in magnitude is needed)"));
+}
+
 Mat4 parseTransform(const Parser& p, const json& v, const std::string& path) {
     const char* what =
         "16 numbers (a row-major matrix), a {\"scale\", \"rotate\", \"translate\"} object or an array of them";
-    if (v.is_object()) return parseTrs(p, v, path);
-    if (!v.is_array()) p.expected(path, what, v);
-    if (!v.empty() && v[0].is_number()) {
+    Mat4 m = kIdentity;
+    if (v.is_object()) {
+        m = parseTrs(p, v, path);
+    } else if (!v.is_array()) {
+        p.expected(path, what, v);
+    } else if (!v.empty() && v[0].is_number()) {
         if (v.size() != 16) p.expected(path, what, v);
-        Mat4 m{};
-        for (std::size_t i = 0; i < 16; ++i) m[i] = p.number(v[i], detail::concat(path, "/", i));
+        for (std::size_t i = 0; i < 16; ++i)
+            m[i] = p.number(v[i], detail::concat(path, "/", i), i % 4 == 3 ? kCoordinate : kLinear);
         if (m[12] != 0.0 || m[13] != 0.0 || m[14] != 0.0 || m[15] != 1.0)
             p.fail(path, "the last row must be [0, 0, 0, 1] (affine transforms only)");
-        const double det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
-                           m[2] * (m[4] * m[9] - m[5] * m[8]);
-        if (!(std::abs(det) > 0.0)) p.fail(path, "the matrix is singular");
-        return m;
+    } else {
+        for (std::size_t i = 0; i < v.size(); ++i) m = multiply(parseTrs(p, v[i], detail::concat(path, "/", i)), m);
     }
-    Mat4 m = kIdentity;
-    for (std::size_t i = 0; i < v.size(); ++i) m = multiply(parseTrs(p, v[i], detail::concat(path, "/", i)), m);
+    checkTransform(p, m, path);
     return m;
 }
 
@@ -396,7 +511,7 @@ Mat4 parseTransform(const Parser& p, const json& v, const std::string& path) {
 TriangleMesh loadObj(const Parser& p, const std::string& file, const std::string& path) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(file, ec))
-        p.fail(path, "OBJ file '" + file + "' does not exist or is not a file");
+        p.fail(path, "OBJ file '" + detail::clip(file, detail::kMaxQuotedPath) + "' does not exist or is not a file");
     tinyobj::ObjReaderConfig config;
     config.triangulate = true;
     config.vertex_color = false;
@@ -406,7 +521,8 @@ TriangleMesh loadObj(const Parser& p, const std::string& file, const std::string
         std::string message = reader.Error();
         while (!message.empty() && (message.back() == '\n' || message.back() == '\r')) message.pop_back();
         std::replace(message.begin(), message.end(), '\n', ' ');
-        p.fail(path, "cannot read OBJ file '" + file + "': " + message);
+        p.fail(path,
+               "cannot read OBJ file '" + detail::clip(file, detail::kMaxQuotedPath) + "': " + detail::clip(message));
     }
     const auto& attrib = reader.GetAttrib();
     TriangleMesh mesh;
@@ -414,8 +530,11 @@ TriangleMesh loadObj(const Parser& p, const std::string& file, const std::string
     mesh.positions.reserve(vertexCount);
     for (std::size_t i = 0; i < vertexCount; ++i) {
         const std::array<float, 3> q{attrib.vertices[3 * i], attrib.vertices[3 * i + 1], attrib.vertices[3 * i + 2]};
-        if (!std::isfinite(q[0]) || !std::isfinite(q[1]) || !std::isfinite(q[2]))
-            p.fail(path, detail::concat("OBJ file '", file, "': vertex ", i + 1, " is not finite"));
+        for (const float c : q)
+            if (!kCoordinate.contains(c))
+                p.fail(path,
+                       detail::concat("OBJ file '", detail::clip(file, detail::kMaxQuotedPath), "': vertex ", i + 1,
+                                      " has a coordinate ", c, " that is not finite or not ", inText(kCoordinate)));
         mesh.positions.push_back(q);
     }
     for (const auto& shape : reader.GetShapes()) {
@@ -427,7 +546,8 @@ TriangleMesh loadObj(const Parser& p, const std::string& file, const std::string
                 for (std::size_t k = 0; k < 3; ++k) {
                     const int index = shape.mesh.indices[offset + k].vertex_index;
                     if (index < 0 || static_cast<std::size_t>(index) >= vertexCount)
-                        p.fail(path, detail::concat("OBJ file '", file, "': shape '", shape.name, "' face ", f,
+                        p.fail(path, detail::concat("OBJ file '", detail::clip(file, detail::kMaxQuotedPath),
+                                                    "': shape '", detail::clip(shape.name), "' face ", f,
                                                     " refers to vertex ", index + 1, " of ", vertexCount));
                     t[k] = static_cast<std::uint32_t>(index);
                 }
@@ -436,7 +556,8 @@ TriangleMesh loadObj(const Parser& p, const std::string& file, const std::string
             offset += n;
         }
     }
-    if (mesh.triangles.empty()) p.fail(path, "OBJ file '" + file + "' has no faces");
+    if (mesh.triangles.empty())
+        p.fail(path, "OBJ file '" + detail::clip(file, detail::kMaxQuotedPath) + "' has no faces");
     return mesh;
 }
 
@@ -473,12 +594,12 @@ Quad parsePlane(const Parser& p, const json& v, const std::string& path) {
     const json& size = p.require(v, path, "size");
     double su = 0.0, sv = 0.0;
     if (size.is_number()) {
-        su = sv = p.number(size, path + "/size", kPositive);
+        su = sv = p.number(size, path + "/size", kLength);
     } else if (size.is_array() && size.size() == 2) {
-        su = p.number(size[0], path + "/size/0", kPositive);
-        sv = p.number(size[1], path + "/size/1", kPositive);
+        su = p.number(size[0], path + "/size/0", kLength);
+        sv = p.number(size[1], path + "/size/1", kLength);
     } else {
-        p.expected(path + "/size", "a side length > 0 or [u, v] side lengths", size);
+        p.expected(path + "/size", "a side length " + inText(kLength) + " or [u, v] side lengths", size);
     }
     const Vec3 a = std::abs(n[1]) < 0.9 ? Vec3{0.0, 1.0, 0.0} : Vec3{1.0, 0.0, 0.0};
     const Vec3 u = normalized(cross(a, n));
@@ -510,10 +631,10 @@ Curves parseHair(const Parser& p, const json& v, const std::string& path) {
         try {
             curves = loadHairFile(resolved);
         } catch (const Error& e) {
-            p.fail(fpath, e.what());
+            p.fail(fpath, e.what(), e.code());
         }
         if (Parser::find(v, "width"))
-            curves.widths = {static_cast<float>(p.number(v["width"], path + "/width", kPositive))};
+            curves.widths = {static_cast<float>(p.number(v["width"], path + "/width", kLength))};
         return curves;
     }
     if (Parser::find(v, "width"))
@@ -523,16 +644,22 @@ Curves parseHair(const Parser& p, const json& v, const std::string& path) {
     p.checkKeys(*ball, bpath, {"center", "radius", "count", "length", "curl", "width", "segments", "seed"});
     HairBallParameters h;
     h.center = p.vec3(*ball, bpath, "center", h.center);
-    h.radius = p.number(*ball, bpath, "radius", h.radius, kPositive);
-    h.count = narrowU32(p.integer(*ball, bpath, "count", h.count, 1, 10'000'000));
-    h.length = p.number(*ball, bpath, "length", h.length, kPositive);
-    h.curl = p.number(*ball, bpath, "curl", h.curl, kNonNegative);
-    h.width = p.number(*ball, bpath, "width", h.width, kPositive);
-    h.segments = narrowU32(p.integer(*ball, bpath, "segments", h.segments, 1, 1000));
+    h.radius = p.number(*ball, bpath, "radius", h.radius, kLength);
+    h.count = narrowU32(p.integer(*ball, bpath, "count", h.count, 1, kMaxHairBallCount));
+    h.length = p.number(*ball, bpath, "length", h.length, kLength);
+    h.curl = p.number(*ball, bpath, "curl", h.curl, kCurl);
+    h.width = p.number(*ball, bpath, "width", h.width, kLength);
+    h.segments = narrowU32(p.integer(*ball, bpath, "segments", h.segments, 1, kMaxHairBallSegments));
     h.seed = narrowU32(p.integer(*ball, bpath, "seed", h.seed, 0, 0xFFFFFFFFull));
-    if (static_cast<std::uint64_t>(h.count) * (h.segments + 1ull) > 100'000'000ull)
-        p.fail(bpath, "count * (segments + 1) exceeds 100,000,000 points");
-    return generateHairBall(h);
+    if (static_cast<std::uint64_t>(h.count) * (h.segments + 1ull) > kMaxHairBallPoints)
+        p.fail(bpath, detail::concat("count * (segments + 1) exceeds ", kMaxHairBallPoints, " points"),
+               ErrorCode::limit);
+    p.addHairPoints(bpath, static_cast<std::uint64_t>(h.count) * (h.segments + 1ull));
+    try {
+        return generateHairBall(h);
+    } catch (const Error& e) {
+        p.fail(bpath, e.what());  // the checks above make this unreachable
+    }
 }
 
 Curves parseCurves(const Parser& p, const json& v, const std::string& path) {
@@ -554,15 +681,16 @@ Curves parseCurves(const Parser& p, const json& v, const std::string& path) {
     const json& w = p.require(v, path, "width");
     const std::string wpath = path + "/width";
     if (w.is_number()) {
-        c.widths = {static_cast<float>(p.number(w, wpath, kPositive))};
+        c.widths = {static_cast<float>(p.number(w, wpath, kLength))};
     } else if (w.is_array()) {
         if (w.size() != total)
-            p.expected(wpath, detail::concat("one width > 0 or an array of ", total, " (one per point)"), w);
+            p.expected(wpath,
+                       detail::concat("one width ", inText(kLength), " or an array of ", total, " (one per point)"), w);
         c.widths.clear();
         for (std::size_t i = 0; i < w.size(); ++i)
-            c.widths.push_back(static_cast<float>(p.number(w[i], detail::concat(wpath, "/", i), kPositive)));
+            c.widths.push_back(static_cast<float>(p.number(w[i], detail::concat(wpath, "/", i), kLength)));
     } else {
-        p.expected(wpath, "a width > 0 or an array of widths (one per point)", w);
+        p.expected(wpath, "a width " + inText(kLength) + " or an array of widths (one per point)", w);
     }
     return c;
 }
@@ -575,12 +703,12 @@ Volume parseVolume(const Parser& p, const json& v, const std::string& path) {
     const std::string type = p.string(p.require(d, dpath, "type"), dpath + "/type");
     if (type == "homogeneous") {
         p.checkKeys(d, dpath, {"type", "value"});
-        vol.density = HomogeneousDensity{p.requiredNumber(d, dpath, "value", kNonNegative)};
+        vol.density = HomogeneousDensity{p.requiredNumber(d, dpath, "value", kDensityRange)};
     } else if (type == "noise") {
         p.checkKeys(d, dpath, {"type", "density", "frequency", "octaves", "seed", "falloff"});
         NoiseCloudDensity n;
-        n.density = p.number(d, dpath, "density", n.density, kNonNegative);
-        n.frequency = p.number(d, dpath, "frequency", n.frequency, kPositive);
+        n.density = p.number(d, dpath, "density", n.density, kDensityRange);
+        n.frequency = p.number(d, dpath, "frequency", n.frequency, kFrequency);
         n.octaves = static_cast<int>(p.integer(d, dpath, "octaves", static_cast<std::uint64_t>(n.octaves), 1, 16));
         n.seed = narrowU32(p.integer(d, dpath, "seed", n.seed, 0, 0xFFFFFFFFull));
         n.falloff = p.number(d, dpath, "falloff", n.falloff, kUnit);
@@ -592,7 +720,8 @@ Volume parseVolume(const Parser& p, const json& v, const std::string& path) {
         if (const json* grid = Parser::find(d, "grid")) g.grid = p.nonEmptyString(*grid, dpath + "/grid");
         std::error_code ec;
         if (!std::filesystem::is_regular_file(g.file, ec))
-            p.fail(dpath + "/file", "VDB file '" + g.file + "' does not exist or is not a file");
+            p.fail(dpath + "/file",
+                   "VDB file '" + detail::clip(g.file, detail::kMaxQuotedPath) + "' does not exist or is not a file");
         vol.density = g;
     } else {
         p.expected(dpath + "/type", "\"homogeneous\", \"noise\" or \"vdb\"", d["type"]);
@@ -610,16 +739,47 @@ Volume parseVolume(const Parser& p, const json& v, const std::string& path) {
         try {
             vdbBounds(*g, vol.boundsMin, vol.boundsMax);
         } catch (const Error& e) {
-            p.fail(dpath + "/file", e.what());
+            p.fail(dpath + "/file", e.what(), e.code());
         }
+        for (std::size_t i = 0; i < 3; ++i)
+            if (!kCoordinate.contains(vol.boundsMin[i]) || !kCoordinate.contains(vol.boundsMax[i]))
+                p.fail(dpath + "/file", detail::concat("the grid's bounds on axis ", i, ", [", vol.boundsMin[i], ", ",
+                                                       vol.boundsMax[i], "], are not ", inText(kCoordinate),
+                                                       "; give \"bounds\""));
     } else {
         p.fail(path, "missing required key \"bounds\"");
     }
-    vol.scale = p.number(v, path, "scale", 1.0, kNonNegative);
+    vol.scale = p.number(v, path, "scale", 1.0, kDensityRange);
     double shortest = std::numeric_limits<double>::infinity();
     for (std::size_t i = 0; i < 3; ++i) shortest = std::min(shortest, vol.boundsMax[i] - vol.boundsMin[i]);
-    vol.step = p.number(v, path, "step", shortest / 64.0, kPositive);
+    vol.step = p.number(v, path, "step", shortest / 64.0, kLength);
     return vol;
+}
+
+// Bounds the samples a ray takes across the volume's box: the longest chord
+// of the transformed box is one of its four diagonals (|sum s_i e_i| is convex
+// in s, so it is largest at a corner of [-1, 1]^3).
+void checkVolumeSamples(const Parser& p, const Volume& volume, const Mat4& objectToWorld, const json& v,
+                        const std::string& path) {
+    const Vec3 e = sub(volume.boundsMax, volume.boundsMin);
+    double diameter = 0.0;
+    for (const double sy : {-1.0, 1.0})
+        for (const double sz : {-1.0, 1.0}) {
+            const Vec3 d{e[0], sy * e[1], sz * e[2]};
+            Vec3 w{};
+            for (std::size_t r = 0; r < 3; ++r)
+                w[r] = objectToWorld[4 * r] * d[0] + objectToWorld[4 * r + 1] * d[1] + objectToWorld[4 * r + 2] * d[2];
+            diameter = std::max(diameter, length(w));
+        }
+    const double samples = diameter / volume.step;
+    if (samples <= kMaxVolumeSamples) return;
+    const bool given = Parser::find(v, "step") != nullptr;
+    p.fail(given ? path + "/step" : path,
+           detail::concat(given ? "a step of " : "the default step (shortest side / 64) of ", volume.step, " takes ",
+                          std::ceil(samples), " samples across the volume's box (", diameter,
+                          " world units across); at most ", kMaxVolumeSamples, " are allowed: ",
+                          given ? "raise the step" : "give a larger \"step\""),
+           ErrorCode::limit);
 }
 
 Rgb parseOpacity(const Parser& p, const json& v, const std::string& path) {
@@ -660,7 +820,7 @@ SceneObject parseObject(const Parser& p, const json& v, std::size_t index) {
         keys({"center", "radius"});
         Sphere s;
         s.center = p.vec3(v, path, "center", s.center);
-        s.radius = p.requiredNumber(v, path, "radius", kPositive);
+        s.radius = p.requiredNumber(v, path, "radius", kLength);
         o.geometry = s;
     } else if (type == "quad") {
         keys({"center", "u", "v"});
@@ -685,39 +845,75 @@ SceneObject parseObject(const Parser& p, const json& v, std::size_t index) {
     if (const json* op = Parser::find(v, "opacity")) o.opacity = parseOpacity(p, *op, path + "/opacity");
     if (const json* t = Parser::find(v, "transform")) o.objectToWorld = parseTransform(p, *t, path + "/transform");
     o.motion = p.vec3(v, path, "motion", o.motion);
+    if (const auto* volume = std::get_if<Volume>(&o.geometry)) checkVolumeSamples(p, *volume, o.objectToWorld, v, path);
     return o;
 }
 
-// Rejects duplicate keys in any object while parsing (nlohmann keeps the last
-// one silently, which hides typos and merge accidents).
+// Parses JSON text, following where the parser is as a JSON pointer so that
+// every failure names its place: a syntax error, a number beyond the double
+// range (1e400), a key that appears twice in one object (nlohmann keeps the
+// last one silently, which hides typos and merge accidents), and nesting
+// deeper than kMaxSceneNesting. The depth is checked as each array or object
+// opens: nlohmann's parser and destructor do not recurse, but everything that
+// walks the document afterwards (dump, comparisons, the checks here) does.
 json parseJson(const Parser& p, const std::string& text) {
-    std::vector<std::set<std::string>> keys;
-    std::string duplicate;
+    struct Level {
+        bool isArray = false;
+        std::size_t index = 0;  // arrays: the element being read
+        std::string key;        // objects: the key whose value is being read
+        bool inMember = false;  // objects: between a key and the end of its value
+        std::set<std::string> keys;
+    };
+    std::vector<Level> levels;
+    auto pointer = [&] {
+        std::string out;
+        for (const Level& level : levels)
+            if (level.isArray) out += "/" + std::to_string(level.index);
+            else if (level.inMember) out += "/" + pointerToken(level.key);
+        return out;
+    };
+    auto elementDone = [&] {
+        if (levels.empty()) return;
+        if (levels.back().isArray) ++levels.back().index;
+        else levels.back().inMember = false;
+    };
     const json::parser_callback_t callback = [&](int, json::parse_event_t event, json& parsed) {
         switch (event) {
-            case json::parse_event_t::object_start: keys.emplace_back(); break;
+            case json::parse_event_t::object_start:
+            case json::parse_event_t::array_start:
+                if (levels.size() >= kMaxSceneNesting)
+                    p.fail(pointer(), detail::concat("nested deeper than ", kMaxSceneNesting, " levels"),
+                           ErrorCode::limit);
+                levels.push_back({event == json::parse_event_t::array_start, 0, {}, false, {}});
+                break;
             case json::parse_event_t::object_end:
-                if (!keys.empty()) keys.pop_back();
+            case json::parse_event_t::array_end:
+                if (!levels.empty()) levels.pop_back();
+                elementDone();
                 break;
             case json::parse_event_t::key:
-                if (!keys.empty() && !keys.back().insert(parsed.get<std::string>()).second && duplicate.empty())
-                    duplicate = parsed.get<std::string>();
+                if (!levels.empty()) {
+                    Level& level = levels.back();
+                    level.key = parsed.get<std::string>();
+                    level.inMember = true;
+                    if (!level.keys.insert(level.key).second)
+                        p.fail(pointer(), "key \"" + detail::clip(level.key) + "\" appears twice in one object");
+                }
                 break;
-            default: break;
+            case json::parse_event_t::value: elementDone(); break;
         }
         return true;
     };
-    json doc;
     try {
-        doc = json::parse(text, callback);
-    } catch (const json::parse_error& e) {
+        return json::parse(text, callback);
+    } catch (const json::exception& e) {
+        // "[json.exception.parse_error.101] parse error at line 1, ...": keep
+        // what follows the bracket; the lexer may quote a long token.
         std::string message = e.what();
         const auto close = message.find("] ");
         if (message.rfind("[json.exception", 0) == 0 && close != std::string::npos) message = message.substr(close + 2);
-        p.fail("", "invalid JSON: " + message);
+        p.fail(pointer(), "invalid JSON: " + detail::clip(message, 2 * detail::kMaxQuotedChars));
     }
-    if (!duplicate.empty()) p.fail("", "key \"" + duplicate + "\" appears twice in one object");
-    return doc;
 }
 
 // ---------------------------------------------------------------------------
@@ -747,7 +943,7 @@ bool Scene::isColoured() const {
 }
 
 LightCamera lightCamera(const LightDescription& light) {
-    auto fail = [](const std::string& m) -> void { throw Error("light: " + m); };
+    auto fail = [](const std::string& m) -> void { throw Error(ErrorCode::argument, "light: " + m); };
     const Vec3 f = normalized(light.direction);
     if (!std::isfinite(f[0]) || !std::isfinite(f[1]) || !std::isfinite(f[2]))
         fail("the direction is zero or not finite");
@@ -804,8 +1000,26 @@ LightCamera lightCamera(const LightDescription& light) {
 }
 
 Curves generateHairBall(const HairBallParameters& h) {
+    // The ranges of spec/scene.md §5.5 keep every direction finite (a turn of
+    // curl * length / segments at most 1e18 radians, squared 1e36).
+    auto check = [](const char* name, double value, const Range& range) {
+        if (!std::isfinite(value) || !range.contains(value))
+            throw Error(ErrorCode::argument,
+                        detail::concat("hair ball: ", name, " ", value, " is not ", inText(range)));
+    };
+    for (const double c : h.center) check("centre coordinate", c, kCoordinate);
+    check("radius", h.radius, kLength);
+    check("length", h.length, kLength);
+    check("curl", h.curl, kCurl);
+    check("width", h.width, kLength);
+    check("count", h.count, Range{1.0, static_cast<double>(kMaxHairBallCount)});
+    check("segments", h.segments, Range{1.0, static_cast<double>(kMaxHairBallSegments)});
+    if (static_cast<std::uint64_t>(h.count) * (h.segments + 1ull) > kMaxHairBallPoints)
+        throw Error(ErrorCode::limit, detail::concat("hair ball: count * (segments + 1) exceeds ", kMaxHairBallPoints,
+                                                     " points"));
+
     Curves curves;
-    const std::uint32_t segments = std::max<std::uint32_t>(h.segments, 1);
+    const std::uint32_t segments = h.segments;
     curves.pointsPerCurve.assign(h.count, segments + 1);
     curves.points.reserve(static_cast<std::size_t>(h.count) * (segments + 1));
     curves.widths = {static_cast<float>(h.width)};
@@ -820,13 +1034,23 @@ Curves generateHairBall(const HairBallParameters& h) {
         Vec3 point = add(h.center, scale(normal, h.radius));
         // Outwards, tilted by up to ~24 degrees.
         Vec3 direction = normalized(add(normal, scale(rng.unitVector(), 0.4)));
-        // A unit vector perpendicular to the direction, from v (or a new random one).
+        // A unit vector perpendicular to the direction, from v (or new random
+        // ones). A random unit vector lies within 1e-3 of +-direction with
+        // probability ~5e-7, so the fallback after kMaxDraws draws (the
+        // coordinate axis least aligned with the direction) is never reached
+        // in practice; it only keeps the loop finite.
         auto perpendicular = [&](Vec3 v) {
-            for (;;) {
+            for (int draw = 0; draw < SceneRandom::kMaxDraws; ++draw) {
                 const Vec3 w = sub(v, scale(direction, dot(v, direction)));
                 if (length(w) > 1e-3) return normalized(w);
                 v = rng.unitVector();
             }
+            std::size_t least = 0;
+            for (std::size_t k = 1; k < 3; ++k)
+                if (std::abs(direction[k]) < std::abs(direction[least])) least = k;
+            Vec3 e{0.0, 0.0, 0.0};
+            e[least] = 1.0;
+            return normalized(sub(e, scale(direction, dot(e, direction))));
         };
         Vec3 axis = perpendicular(rng.unitVector());
         curves.points.push_back(toFloat(point));
@@ -843,24 +1067,34 @@ Curves generateHairBall(const HairBallParameters& h) {
 }
 
 Curves loadHairFile(const std::string& path) {
-    auto fail = [&](const std::string& m) -> void { throw Error("hair file '" + path + "': " + m); };
+    auto fail = [&](ErrorCode code, const std::string& m) -> void {
+        throw Error(code, "hair file '" + detail::clip(path, detail::kMaxQuotedPath) + "': " + m);
+    };
     std::error_code ec;
-    if (!std::filesystem::is_regular_file(path, ec)) fail("does not exist or is not a file");
+    if (!std::filesystem::is_regular_file(path, ec)) fail(ErrorCode::io, "does not exist or is not a file");
+    const std::uint64_t fileBytes = std::filesystem::file_size(path, ec);
+    if (ec) fail(ErrorCode::io, "cannot read its size: " + ec.message());
     std::ifstream in(path, std::ios::binary);
-    if (!in) fail(std::string("cannot open: ") + std::strerror(errno));
-    const std::vector<unsigned char> bytes{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-    if (in.bad()) fail("read error");
+    if (!in) fail(ErrorCode::io, std::string("cannot open: ") + std::strerror(errno));
     constexpr std::size_t kHeader = 128;
-    if (bytes.size() < kHeader) fail(detail::concat("is ", bytes.size(), " bytes, shorter than the 128-byte header"));
-    if (std::memcmp(bytes.data(), "HAIR", 4) != 0) fail("does not start with \"HAIR\"");
+    if (fileBytes < kHeader)
+        fail(ErrorCode::corrupt, detail::concat("is ", fileBytes, " bytes, shorter than the 128-byte header"));
+    std::vector<unsigned char> bytes(kHeader);
+    if (!in.read(reinterpret_cast<char*>(bytes.data()), kHeader)) fail(ErrorCode::io, "read error in the header");
+    if (std::memcmp(bytes.data(), "HAIR", 4) != 0) fail(ErrorCode::format, "does not start with \"HAIR\"");
     const std::uint64_t hairCount = readU32(&bytes[4]);
     const std::uint64_t pointCount = readU32(&bytes[8]);
     const std::uint32_t flags = readU32(&bytes[12]);
     const std::uint32_t defaultSegments = readU32(&bytes[16]);
     const float defaultThickness = readF32(&bytes[20]);
     constexpr std::uint32_t kSegments = 1, kPoints = 2, kThickness = 4, kTransparency = 8, kColor = 16;
-    if (flags & ~0x1Fu) fail(detail::concat("unknown array flags 0x", std::hex, flags));
-    if (!(flags & kPoints)) fail("has no points array (flag bit 1 not set)");
+    if (flags & ~0x1Fu) fail(ErrorCode::corrupt, detail::concat("unknown array flags 0x", std::hex, flags));
+    if (!(flags & kPoints)) fail(ErrorCode::corrupt, "has no points array (flag bit 1 not set)");
+    // Sizes come from the header: check them against the file and the limit
+    // before allocating anything they ask for.
+    if (pointCount > kMaxHairBallPoints)
+        fail(ErrorCode::limit, detail::concat("has ", pointCount, " points, more than the limit of ",
+                                              kMaxHairBallPoints));
 
     std::uint64_t expected = kHeader;
     if (flags & kSegments) expected += 2 * hairCount;
@@ -868,10 +1102,17 @@ Curves loadHairFile(const std::string& path) {
     if (flags & kThickness) expected += 4 * pointCount;
     if (flags & kTransparency) expected += 4 * pointCount;
     if (flags & kColor) expected += 12 * pointCount;
-    if (bytes.size() != expected)
-        fail(detail::concat("is ", bytes.size(), " bytes, but its header (", hairCount, " hairs, ", pointCount,
+    if (fileBytes != expected)
+        fail(ErrorCode::corrupt,
+             detail::concat("is ", fileBytes, " bytes, but its header (", hairCount, " hairs, ", pointCount,
                             " points, flags 0x", std::hex, flags, std::dec, ") implies ", expected,
-                            bytes.size() < expected ? " (truncated)" : ""));
+                            fileBytes < expected ? " (truncated)" : ""));
+    if (2 * hairCount > pointCount)
+        fail(ErrorCode::corrupt, detail::concat("has ", hairCount, " hairs but only ", pointCount,
+                                                " points (every hair has at least 2)"));
+    bytes.resize(expected);
+    if (!in.read(reinterpret_cast<char*>(bytes.data() + kHeader), static_cast<std::streamsize>(expected - kHeader)))
+        fail(ErrorCode::io, "read error (the file shrank while being read?)");
 
     Curves curves;
     std::size_t offset = kHeader;
@@ -883,36 +1124,45 @@ Curves loadHairFile(const std::string& path) {
             segments = static_cast<std::uint32_t>(bytes[offset] | bytes[offset + 1] << 8);
             offset += 2;
         }
-        if (segments == 0) fail(detail::concat("hair ", i, " has 0 segments"));
+        if (segments == 0) fail(ErrorCode::corrupt, detail::concat("hair ", i, " has 0 segments"));
         curves.pointsPerCurve[i] = segments + 1;
         total += segments + 1ull;
     }
     if (total != pointCount)
-        fail(detail::concat("the hairs' segments add up to ", total, " points but the header says ", pointCount));
+        fail(ErrorCode::corrupt,
+             detail::concat("the hairs' segments add up to ", total, " points but the header says ", pointCount));
     curves.points.resize(pointCount);
     for (std::uint64_t i = 0; i < pointCount; ++i, offset += 12) {
         curves.points[i] = {readF32(&bytes[offset]), readF32(&bytes[offset + 4]), readF32(&bytes[offset + 8])};
         for (float c : curves.points[i])
-            if (!std::isfinite(c)) fail(detail::concat("point ", i, " is not finite"));
+            if (!kCoordinate.contains(c))
+                fail(ErrorCode::corrupt, detail::concat("point ", i, " has a coordinate ", c,
+                                                        " that is not finite or not ", inText(kCoordinate)));
     }
     if (flags & kThickness) {
         curves.widths.resize(pointCount);
         for (std::uint64_t i = 0; i < pointCount; ++i, offset += 4) {
             curves.widths[i] = readF32(&bytes[offset]);
-            if (!std::isfinite(curves.widths[i]) || curves.widths[i] < 0.0f)
-                fail(detail::concat("thickness of point ", i, " is ", curves.widths[i]));
+            if (!kNonNegativeLength.contains(curves.widths[i]))
+                fail(ErrorCode::corrupt, detail::concat("thickness of point ", i, " is ", curves.widths[i],
+                                                        ", not ", inText(kNonNegativeLength)));
         }
     } else {
-        if (!std::isfinite(defaultThickness) || !(defaultThickness > 0.0f))
-            fail(detail::concat("default thickness ", defaultThickness, " is not > 0 and there is no thickness array"));
+        if (!kLength.contains(defaultThickness))
+            fail(ErrorCode::corrupt, detail::concat("default thickness ", defaultThickness, " is not ", inText(kLength),
+                                                    " and there is no thickness array"));
         curves.widths = {defaultThickness};
     }
     // Transparency and colour arrays are skipped: the scene's opacity applies.
     return curves;
 }
 
-Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name) {
-    const Parser p(name, baseDirectory);
+Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name,
+                 const SceneReadOptions& options) {
+    const Parser p(name, baseDirectory, options.maxHairPoints);
+    if (jsonText.size() > options.maxBytes)
+        p.fail("", detail::concat("is ", jsonText.size(), " bytes, more than the limit of ", options.maxBytes),
+               ErrorCode::limit);
     const json doc = parseJson(p, jsonText);
     p.requireObject(doc, "", "a JSON object {\"light\": ..., \"objects\": [...]} at the top level");
     p.checkKeys(doc, "", {"light", "objects"});
@@ -927,15 +1177,36 @@ Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, 
     return scene;
 }
 
-Scene loadScene(const std::string& path) {
+Scene readScene(std::istream& in, const std::string& baseDirectory, const std::string& name,
+                const SceneReadOptions& options) {
+    const std::string where = "scene '" + detail::clip(name, detail::kMaxQuotedPath) + "'";
+    std::string text;
+    std::vector<char> buffer(1 << 16);
+    while (in) {
+        in.read(buffer.data(), static_cast<std::streamsize>(buffer.size()));
+        const auto got = static_cast<std::size_t>(in.gcount());
+        if (got > options.maxBytes - std::min<std::uint64_t>(text.size(), options.maxBytes))
+            throw Error(ErrorCode::limit,
+                        detail::concat(where, ": is more than the limit of ", options.maxBytes, " bytes"));
+        text.append(buffer.data(), got);
+    }
+    if (in.bad()) throw Error(ErrorCode::io, where + ": read error");
+    return parseScene(text, baseDirectory, name, options);
+}
+
+Scene loadScene(const std::string& path, const SceneReadOptions& options) {
+    const std::string where = "scene '" + detail::clip(path, detail::kMaxQuotedPath) + "'";
     std::error_code ec;
+    // Not opened unless it is a regular file: opening a FIFO would block.
     if (!std::filesystem::is_regular_file(path, ec))
-        throw Error("scene '" + path + "': does not exist or is not a file");
+        throw Error(ErrorCode::io, where + ": does not exist or is not a file");
+    const std::uint64_t size = std::filesystem::file_size(path, ec);
+    if (!ec && size > options.maxBytes)
+        throw Error(ErrorCode::limit,
+                    detail::concat(where, ": is ", size, " bytes, more than the limit of ", options.maxBytes));
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error("scene '" + path + "': cannot open: " + std::strerror(errno));
-    const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-    if (in.bad()) throw Error("scene '" + path + "': read error");
-    return parseScene(text, std::filesystem::path(path).parent_path().string(), path);
+    if (!in) throw Error(ErrorCode::io, where + ": cannot open: " + std::strerror(errno));
+    return readScene(in, std::filesystem::path(path).parent_path().string(), path, options);
 }
 
 }  // namespace dsm

@@ -15,12 +15,10 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <limits>
 #include <memory>
 #include <numbers>
-
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include <ImathBox.h>
 #include <ImathMatrix.h>
@@ -45,9 +43,12 @@
 #include <nlohmann/json.hpp>
 #include <tbb/parallel_for.h>
 
+#include <sys/stat.h>
+
 #include "dsm/compressor.h"
 #include "dsm/error.h"
 #include "dsm/names.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/writer.h"
 #include "text.h"
@@ -499,36 +500,27 @@ constexpr std::uint64_t kMaxSamplesPerBand = 1ull << 27;
 
 std::string quoted(const std::string& path) { return concat("'", path, "'"); }
 
-/// A temporary file beside `path`, removed unless commit() renamed it.
-class TemporaryFile {
-public:
-    explicit TemporaryFile(const std::string& path) : path_(path) {
-        const std::filesystem::path target(path);
-        std::string name = (target.parent_path() / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
-        if (target.parent_path().empty()) name = "." + target.filename().string() + ".tmp-XXXXXX";
-        const int fd = ::mkstemp(name.data());
-        if (fd < 0) throw Error(concat(quoted(path), ": cannot create a temporary file: ", std::strerror(errno)));
-        ::fchmod(fd, 0644);  // mkstemp creates 0600; an image is meant to be shared
-        ::close(fd);
-        temporary_ = name;
-    }
-    ~TemporaryFile() {
-        if (!committed_) std::remove(temporary_.c_str());
-    }
-    TemporaryFile(const TemporaryFile&) = delete;
-    TemporaryFile& operator=(const TemporaryFile&) = delete;
-    const std::string& path() const { return temporary_; }
-    void commit() {
-        if (std::rename(temporary_.c_str(), path_.c_str()) != 0)
-            throw Error(concat(quoted(path_), ": cannot rename the finished file into place: ", std::strerror(errno)));
-        committed_ = true;
-    }
+/// A maxDeviation or maxLinearError option: <= 0 for the default, else in
+/// [kMinExrErrorBound, 1]. NaN is refused rather than taken for the default.
+void checkErrorBoundOption(double value, const char* what) {
+    if (value <= 0.0) return;
+    if (!(value >= kMinExrErrorBound && value <= 1.0))
+        throw Error(ErrorCode::argument, concat(what, " ", value, " is outside [", kMinExrErrorBound,
+                                                ", 1] (float32 samples cannot keep a tighter bound)"));
+}
 
-private:
-    std::string path_;
-    std::string temporary_;
-    bool committed_ = false;
-};
+/// Re-reads the offset tables of the EXR OpenEXR just wrote: every chunk must
+/// be there before the file may replace the target.
+void verifyWrittenExr(const OutputFile& file) {
+    bool complete = false;
+    try {
+        Imf::MultiPartInputFile written(file.temporaryPath().c_str());
+        complete = written.parts() == 1 && written.partComplete(0);
+    } catch (const std::exception& e) {
+        throw Error(ErrorCode::io, concat(quoted(file.path()), ": the written image does not read back: ", e.what()));
+    }
+    if (!complete) throw Error(ErrorCode::io, concat(quoted(file.path()), ": the written image is incomplete"));
+}
 
 /// Per-pixel sample lists of a band of rows and the frame buffer that points
 /// OpenEXR at them. Rows [y0, y0 + rows) of columns [x0, x0 + width), in the
@@ -594,6 +586,9 @@ struct Band {
 
 ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
                               const ExrExportOptions& options) {
+    checkErrorBoundOption(options.maxDeviation, "deep EXR export: the largest deviation");
+    checkOutputPath(exrPath);
+    refuseOutputOverInputs(exrPath, {dsmPath});
     const auto map = DeepShadowMap::open(dsmPath);
     const MapInfo& info = map->info();
     if (options.level >= info.levels.size())
@@ -648,7 +643,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     header.insert("dsm:filterWidth", Imf::DoubleAttribute(info.filterWidth));
     header.insert("dsm:metadata", Imf::StringAttribute(info.metadata));
 
-    TemporaryFile temporary(exrPath);
+    OutputFile output(exrPath);
     std::vector<double> largest(std::size_t(height), 0.0);
     std::vector<std::uint64_t> oneStep(std::size_t(height), 0);
     auto fill = [&](Band& band) {
@@ -679,7 +674,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
             const int tile = int(options.tileSize);
             header.setTileDescription(Imf::TileDescription(unsigned(tile), unsigned(tile), Imf::ONE_LEVEL));
             header.setType(Imf::DEEPTILE);
-            Imf::DeepTiledOutputFile out(temporary.path().c_str(), header);
+            Imf::DeepTiledOutputFile out(output.temporaryPath().c_str(), header);
             for (int ty = 0; ty * tile < height; ++ty) {
                 band.reset(0, ty * tile, width, std::min(tile, height - ty * tile));
                 fill(band);
@@ -688,7 +683,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
             }
         } else {
             header.setType(Imf::DEEPSCANLINE);
-            Imf::DeepScanLineOutputFile out(temporary.path().c_str(), header);
+            Imf::DeepScanLineOutputFile out(output.temporaryPath().c_str(), header);
             constexpr int kRows = 16;
             for (int y = 0; y < height; y += kRows) {
                 band.reset(0, y, width, std::min(kRows, height - y));
@@ -700,9 +695,15 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     } catch (const Error&) {
         throw;
     } catch (const std::exception& e) {
-        throw Error(concat(quoted(exrPath), ": ", e.what()));
+        // OpenEXR names the temporary file it was writing: name the output instead.
+        std::string what = e.what();
+        for (auto at = what.find(output.temporaryPath()); at != std::string::npos;
+             at = what.find(output.temporaryPath(), at + exrPath.size()))
+            what.replace(at, output.temporaryPath().size(), exrPath);
+        throw Error(ErrorCode::io, concat(quoted(exrPath), ": ", what));
     }
-    temporary.commit();
+    verifyWrittenExr(output);
+    output.commit();
     for (double v : largest) report.largestDeviation = std::max(report.largestDeviation, v);
     for (std::uint64_t n : oneStep) report.oneStepExcess += n;
     return report;
@@ -710,13 +711,158 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
 
 namespace {
 
+/// The value size OpenEXR 3.1 reads for an attribute type whatever size the
+/// file records, or 0 for a type read by its content or its recorded size.
+std::uint32_t fixedExrAttributeSize(const std::string& type) {
+    static const std::pair<const char*, std::uint32_t> kSizes[] = {
+        {"box2f", 16},   {"box2i", 16},          {"chromaticities", 32}, {"compression", 1}, {"deepImageState", 1},
+        {"double", 8},   {"envmap", 1},          {"float", 4},           {"int", 4},         {"keycode", 28},
+        {"lineOrder", 1}, {"m33d", 72},          {"m33f", 36},           {"m44d", 128},      {"m44f", 64},
+        {"rational", 8}, {"tiledesc", 9},        {"timecode", 8},        {"v2d", 16},        {"v2f", 8},
+        {"v2i", 8},      {"v3d", 24},            {"v3f", 12},            {"v3i", 12}};
+    for (const auto& [name, size] : kSizes)
+        if (type == name) return size;
+    return 0;
+}
+
+std::uint32_t littleEndian32(const std::string& bytes, std::size_t at) {
+    std::uint32_t v = 0;
+    for (std::size_t i = 0; i < 4; ++i) v |= std::uint32_t(std::uint8_t(bytes[at + i])) << (8 * i);
+    return v;
+}
+
+/// Why OpenEXR 3.1 would read a different number of bytes than `value` (an
+/// attribute of type `type`, as recorded) holds, or "" when it reads exactly
+/// those: the types it reads by their content must fill their recorded size.
+std::string exrAttributeDisagreement(const std::string& type, const std::string& value) {
+    const std::size_t size = value.size();
+    if (type == "chlist") {
+        // name\0 (1 to 255 bytes), 16 bytes of channel, ..., then an empty name.
+        for (std::size_t at = 0;;) {
+            const std::size_t end = value.find('\0', at);
+            if (end == std::string::npos || end - at > 255)
+                return "its channel list does not end within them";
+            if (end == at) {
+                if (end + 1 == size) return "";
+                return concat("its channel list ends after ", end + 1);
+            }
+            at = end + 1 + 16;
+            if (at > size) return "its channel list does not end within them";
+        }
+    }
+    if (type == "stringvector") {
+        // int32 length + bytes, repeated until the recorded size is read.
+        for (std::size_t at = 0; at < size;) {
+            if (size - at < 4) return "its strings do not fill them";
+            const std::uint32_t length = littleEndian32(value, at);
+            at += 4;
+            if (length > size - at) return "a string in it runs past them";
+            at += length;
+        }
+        return "";
+    }
+    if (type == "floatvector") return size % 4 == 0 ? "" : "that is not a whole number of floats";
+    if (type == "preview") {
+        if (size < 8) return "a preview needs at least 8 for its width and height";
+        const std::uint64_t pixels = std::uint64_t(littleEndian32(value, 0)) * littleEndian32(value, 4);
+        return pixels * 4 + 8 == size ? "" : concat("its preview image needs ", pixels * 4 + 8);
+    }
+    if (type == "idmanifest") return size >= 4 ? "" : "an idmanifest needs at least 4 for its size field";
+    return "";
+}
+
+/// Reads the attribute list of every header of an OpenEXR file without
+/// OpenEXR and refuses a size no file of this length can hold. OpenEXR 3.1
+/// allocates the size an attribute claims before reading it, so a few damaged
+/// bytes would otherwise cost gigabytes. The layout (magic, version, then
+/// name\0 type\0 int32-size value ..., a header ending in an empty name,
+/// and multi-part files ending their headers with one more) is OpenEXR's
+/// documented file layout. OpenEXR reads fixed-size types and channel lists
+/// by their content, not by the recorded size; an attribute whose content
+/// disagrees with its size is refused too, since OpenEXR would read the rest
+/// of the header out of step and meet sizes this walk never checked.
+/// Anything else is left for OpenEXR to judge.
+void checkExrHeaderSizes(const std::string& path, std::uint64_t fileSize) {
+    std::ifstream in(path, std::ios::binary);
+    std::uint8_t start[8];
+    if (!in.read(reinterpret_cast<char*>(start), sizeof start)) return;
+    if (start[0] != 0x76 || start[1] != 0x2f || start[2] != 0x31 || start[3] != 0x01) return;
+    const bool multiPart = (start[5] & 0x10) != 0;  // version flag bit 12
+    std::uint64_t offset = sizeof start;
+    // A name or type longer than 255 bytes is invalid; OpenEXR reports it.
+    const auto readName = [&](std::string& name) {
+        name.clear();
+        for (char c; in.get(c);) {
+            ++offset;
+            if (c == '\0') return true;
+            if (name.size() == 255) return false;
+            name.push_back(c);
+        }
+        return false;
+    };
+    std::string name, type, value;
+    int part = 0;
+    for (bool headerStart = true;;) {
+        if (!readName(name)) return;
+        if (name.empty()) {
+            // An empty name ends a header; right at a header's start it ends a
+            // multi-part file's list of headers.
+            if (!multiPart || headerStart) return;
+            headerStart = true;
+            ++part;
+            continue;
+        }
+        headerStart = false;
+        if (!readName(type)) return;
+        std::uint8_t size[4];
+        if (!in.read(reinterpret_cast<char*>(size), sizeof size)) return;
+        offset += sizeof size;
+        const std::int32_t claimed = static_cast<std::int32_t>(std::uint32_t(size[0]) | std::uint32_t(size[1]) << 8 |
+                                                               std::uint32_t(size[2]) << 16 |
+                                                               std::uint32_t(size[3]) << 24);
+        const std::string attribute =
+            concat(quoted(path), ": ", multiPart ? concat("part ", part, " ") : std::string(), "header attribute '",
+                   name, "' (", type, ")");
+        if (claimed < 0 || std::uint64_t(claimed) > fileSize - offset)
+            throw Error(ErrorCode::corrupt, concat(attribute, " claims ", claimed, " bytes but the file has ",
+                                                   fileSize - offset, " bytes left"));
+        if (const std::uint32_t fixed = fixedExrAttributeSize(type); fixed != 0 && std::uint32_t(claimed) != fixed)
+            throw Error(ErrorCode::corrupt,
+                        concat(attribute, " records ", claimed, " bytes but a ", type, " holds ", fixed));
+        if (type == "chlist" || type == "stringvector" || type == "floatvector" || type == "preview" ||
+            type == "idmanifest") {
+            value.resize(std::size_t(claimed));
+            if (!in.read(value.data(), claimed)) return;
+            if (const std::string why = exrAttributeDisagreement(type, value); !why.empty())
+                throw Error(ErrorCode::corrupt, concat(attribute, " records ", claimed, " bytes but ", why));
+        }
+        offset += std::uint64_t(claimed);
+        if (!in.seekg(static_cast<std::streamoff>(offset))) return;
+    }
+}
+
+/// Bounds OpenEXR's own allocations for every file it opens from now on: its
+/// header check refuses data windows and tiles larger than a map can be.
+void limitOpenExrAllocations() {
+    static const bool once = [] {
+        Imf::Header::setMaxImageSize(int(kMaxExrExtent), int(kMaxExrExtent));
+        Imf::Header::setMaxTileSize(int(kMaxExrExtent), int(kMaxExrExtent));
+        return true;
+    }();
+    (void)once;
+}
+
 /// The deep EXR being imported: header checks and bands of pixels.
 class DeepExrSource {
 public:
     explicit DeepExrSource(const std::string& path) : path_(path) {
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec))
-            throw Error(concat(quoted(path), ": cannot open: ", std::strerror(ENOENT)));
+        // stat, not open: opening a FIFO would wait for a writer forever.
+        struct stat st {};
+        if (::stat(path.c_str(), &st) != 0)
+            throw Error(ErrorCode::io, concat(quoted(path), ": cannot open: ", std::strerror(errno)));
+        if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, concat(quoted(path), ": not a regular file"));
+        checkExrHeaderSizes(path, static_cast<std::uint64_t>(st.st_size));
+        limitOpenExrAllocations();
         bool tiled = false, deep = false, multiPart = false;
         if (!Imf::isOpenExrFile(path.c_str(), tiled, deep, multiPart))
             throw Error(concat(quoted(path), ": not an OpenEXR file"));
@@ -871,6 +1017,12 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
 
 ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
                               const ExrImportOptions& options) {
+    checkErrorBoundOption(options.maxLinearError, "deep EXR import: the linearisation error");
+    if (!std::isfinite(options.tolerance))
+        throw Error(ErrorCode::argument,
+                    concat("deep EXR import: the tolerance must be finite, got ", options.tolerance));
+    checkOutputPath(dsmPath);
+    refuseOutputOverInputs(dsmPath, {exrPath});
     try {
         DeepExrSource source(exrPath);
         const Imf::Header& h = source.header();

@@ -24,11 +24,14 @@ using detail::concat;
 void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o) {
     path = p;
     options = o;
-    fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC);
-    if (fd < 0) throw Error(concat(where(), ": cannot open: ", std::strerror(errno)));
+    // O_NONBLOCK: opening a FIFO would otherwise wait for a writer forever.
+    // It is refused below, and means nothing for the regular file we keep.
+    fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
+    if (fd < 0) throw Error(ErrorCode::io, concat(where(), ": cannot open: ", std::strerror(errno)));
     struct stat st {};
-    if (::fstat(fd, &st) != 0) throw Error(concat(where(), ": cannot stat: ", std::strerror(errno)));
-    if (!S_ISREG(st.st_mode)) throw Error(concat(where(), ": not a regular file"));
+    if (::fstat(fd, &st) != 0) throw Error(ErrorCode::io, concat(where(), ": cannot stat: ", std::strerror(errno)));
+    if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, concat(where(), ": not a regular file"));
+    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
     const std::uint64_t fileSize = static_cast<std::uint64_t>(st.st_size);
 
     // Header: the fixed part first, then all of it if a newer minor version

@@ -1,18 +1,13 @@
 #include "dsm/writer.h"
 
 #include <bit>
-#include <cerrno>
 #include <cmath>
-#include <cstdio>
-#include <cstring>
-#include <filesystem>
 #include <map>
+#include <memory>
 #include <vector>
 
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include "dsm/error.h"
+#include "dsm/output_file.h"
 #include "format_layout.h"
 #include "mipmap.h"
 #include "text.h"
@@ -43,9 +38,8 @@ struct PendingTile {
 
 struct MapWriter::Impl {
     std::string path;
-    std::string temporaryPath;
     WriterOptions options;
-    std::FILE* file = nullptr;
+    std::unique_ptr<OutputFile> file;
     std::uint64_t offset = 0;
     std::vector<Level> levels;
     std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
@@ -54,8 +48,7 @@ struct MapWriter::Impl {
     std::string where() const { return concat("'", path, "'"); }
 
     void writeBytes(const std::uint8_t* data, std::size_t size) {
-        if (size > 0 && std::fwrite(data, 1, size, file) != size)
-            throw Error(concat(where(), ": write failed: ", std::strerror(errno)));
+        file->write(data, size);
         offset += size;
     }
 
@@ -178,33 +171,12 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : im
     }
     s.pending.resize(count);
 
-    const std::filesystem::path target(path);
-    std::string pattern = (target.has_parent_path() ? target.parent_path() / ("." + target.filename().string())
-                                                    : std::filesystem::path("." + target.filename().string()))
-                              .string() +
-                          ".tmp-XXXXXX";
-    std::vector<char> name(pattern.begin(), pattern.end());
-    name.push_back('\0');
-    const int fd = ::mkstemp(name.data());
-    if (fd < 0) fail(concat("cannot create a temporary file beside it: ", std::strerror(errno)));
-    s.temporaryPath = name.data();
-    ::fchmod(fd, 0644);  // mkstemp creates 0600; a map is meant to be shared like any image
-    s.file = ::fdopen(fd, "wb");
-    if (!s.file) {
-        ::close(fd);
-        std::remove(s.temporaryPath.c_str());
-        fail(concat("cannot open the temporary file: ", std::strerror(errno)));
-    }
+    s.file = std::make_unique<OutputFile>(path);
     const std::vector<std::uint8_t> placeholder(format::kHeaderSize, 0);
     s.writeBytes(placeholder.data(), placeholder.size());
 }
 
-MapWriter::~MapWriter() {
-    if (impl_ && !impl_->finished) {
-        if (impl_->file) std::fclose(impl_->file);
-        std::remove(impl_->temporaryPath.c_str());
-    }
-}
+MapWriter::~MapWriter() = default;
 
 std::uint32_t MapWriter::tilesX() const { return impl_->levels[0].info.tilesX; }
 std::uint32_t MapWriter::tilesY() const { return impl_->levels[0].info.tilesY; }
@@ -291,15 +263,8 @@ void MapWriter::finish() {
     header.fileSize = s.offset;
 
     const std::vector<std::uint8_t> headerBytes = format::encodeHeader(header);
-    if (std::fseek(s.file, 0, SEEK_SET) != 0 ||
-        std::fwrite(headerBytes.data(), 1, headerBytes.size(), s.file) != headerBytes.size() ||
-        std::fflush(s.file) != 0 || ::fsync(::fileno(s.file)) != 0)
-        throw Error(concat(s.where(), ": write failed: ", std::strerror(errno)));
-    const int closed = std::fclose(s.file);
-    s.file = nullptr;
-    if (closed != 0) throw Error(concat(s.where(), ": close failed: ", std::strerror(errno)));
-    if (std::rename(s.temporaryPath.c_str(), s.path.c_str()) != 0)
-        throw Error(concat(s.where(), ": cannot rename the finished file into place: ", std::strerror(errno)));
+    s.file->writeAt(0, headerBytes.data(), headerBytes.size());
+    s.file->commit();
     s.finished = true;
 }
 

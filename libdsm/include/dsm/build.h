@@ -5,3 +5,4 @@
 #include "dsm/dsm.h"
 #include "dsm/sampler.h"
 #include "dsm/scene.h"
+#include "dsm/threads.h"

@@ -12,6 +12,7 @@
 #include "dsm/map_info.h"
 #include "dsm/merge.h"
 #include "dsm/names.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/sweep.h"

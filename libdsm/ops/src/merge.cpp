@@ -20,6 +20,7 @@
 
 #include "dsm/error.h"
 #include "dsm/names.h"
+#include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/visibility_product.h"
 #include "dsm/writer.h"
@@ -89,12 +90,8 @@ Json parseMetadata(const DeepShadowMap& map) {
 
 void checkOutput(const std::vector<std::string>& inputs, const std::string& output) {
     if (inputs.empty()) throw Error("merge: no input maps");
-    if (output.empty()) throw Error("merge: no output file");
-    for (const std::string& input : inputs) {
-        std::error_code ec;
-        if (std::filesystem::equivalent(input, output, ec))
-            throw Error(concat(quoted(output), ": the output is also an input; write to another file"));
-    }
+    checkOutputPath(output);
+    refuseOutputOverInputs(output, inputs);
 }
 
 std::vector<Map> openAll(const std::vector<std::string>& inputs) {

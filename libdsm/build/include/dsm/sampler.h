@@ -40,7 +40,8 @@ struct BuildOptions {
     /// Pixel rectangle [x0, x1) x [y0, y1) to build; the rest of the map is
     /// left empty (for distributed builds stitched later). Empty = everything.
     std::array<std::uint32_t, 4> region{0, 0, 0, 0};
-    /// Worker threads; 0 = all cores. The output does not depend on it.
+    /// Worker threads; 0 = all cores, and more than the cores are clamped to
+    /// them (usableThreads(), dsm/threads.h). The output does not depend on it.
     unsigned threads = 0;
     std::uint64_t seed = 1;
     int zlibLevel = 6;
@@ -71,6 +72,22 @@ struct BuildStats {
     /// (z, V per channel) pairs.
     std::uint64_t rawBytes = 0;
 };
+
+/// What a build will take, known before it starts.
+struct BuildEstimate {
+    std::uint32_t width = 0;         ///< map size (the scene light's or the options')
+    std::uint32_t height = 0;
+    std::uint64_t pixels = 0;        ///< pixels built: the region's
+    std::uint64_t sampleRays = 0;    ///< pixels x samples per pixel
+    /// Memory the build holds at once, at least: the tile directories of all
+    /// levels, the pixel functions of a row of tiles and of the pending mip
+    /// tiles (a few vertices each), and each worker's samples of one tile.
+    std::uint64_t memoryBytes = 0;
+};
+
+/// The estimate for buildMap(scene, options, ...), without building; options
+/// are not checked (buildMap does that).
+BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options);
 
 /// Renders `scene` from its light and writes the map to `path` (atomically:
 /// nothing is left at `path` on failure). Deterministic: the same scene,

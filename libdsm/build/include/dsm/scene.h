@@ -4,7 +4,9 @@
 #pragma once
 
 #include <array>
+#include <cstddef>
 #include <cstdint>
+#include <iosfwd>
 #include <string>
 #include <variant>
 #include <vector>
@@ -127,7 +129,9 @@ struct Scene {
 };
 
 /// A ball of hair like Lokovic & Veach's Fig. 6: `count` curves rooted at
-/// random points of a sphere, growing outwards with random curl.
+/// random points of a sphere, growing outwards with random curl. Every field
+/// must lie in the range spec/scene.md §5.5 gives it; generateHairBall()
+/// throws dsm::Error (ErrorCode::argument) otherwise.
 struct HairBallParameters {
     Vec3 center{0.0, 0.0, 0.0};
     double radius = 1.0;
@@ -141,17 +145,41 @@ struct HairBallParameters {
 };
 Curves generateHairBall(const HairBallParameters& parameters);
 
+/// Limits on what reading a scene may consume (spec/scene.md §1.2).
+struct SceneReadOptions {
+    /// Largest scene text read, in bytes; a larger scene is refused with
+    /// ErrorCode::limit before it is read (or as soon as a stream exceeds it).
+    std::uint64_t maxBytes = std::uint64_t{256} << 20;
+    /// Most points the scene's hair balls may generate together (each hair
+    /// has segments + 1); a scene asking for more is refused with
+    /// ErrorCode::limit before its hair is generated. The default is the
+    /// per-ball cap of 10^8, which a larger value does not lift.
+    std::uint64_t maxHairPoints = 100'000'000;
+};
+
+/// Deepest nesting of arrays and objects a scene may have (the top-level object
+/// is level 1). Deeper JSON is refused with ErrorCode::limit while it is parsed,
+/// before anything walks it recursively.
+inline constexpr std::size_t kMaxSceneNesting = 64;
+
 /// Reads Cem Yuksel's binary .hair format (header "HAIR", points, optional
 /// segments, thickness). Throws dsm::Error naming the file on bad input.
 Curves loadHairFile(const std::string& path);
 
 /// Reads a scene file (spec/scene.md). Relative file names inside (OBJ, .hair,
 /// .vdb) are relative to the scene file. Throws dsm::Error naming the file, the
-/// JSON path (e.g. "/objects/2/opacity") and what was expected.
-Scene loadScene(const std::string& path);
+/// JSON path (e.g. "/objects/2/opacity") and what was expected: ErrorCode::scene
+/// for an invalid scene, ::limit for one too large or too deeply nested, ::io
+/// when the file cannot be read.
+Scene loadScene(const std::string& path, const SceneReadOptions& options = {});
+/// Reads a scene from a stream (e.g. standard input) up to its end, never more
+/// than `options.maxBytes`; otherwise as parseScene().
+Scene readScene(std::istream& in, const std::string& baseDirectory, const std::string& name,
+                const SceneReadOptions& options = {});
 /// Parses scene JSON text; `baseDirectory` resolves relative file names and
 /// `name` is used in messages.
-Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name);
+Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name,
+                 const SceneReadOptions& options = {});
 
 /// The light camera of a scene's light (with the area-light push-back).
 LightCamera lightCamera(const LightDescription& light);

@@ -77,6 +77,14 @@ StandardCameraMatrices standardCameraMatrices(const LightCamera& camera);
 LightCamera cameraFromStandardMatrices(const std::array<std::array<double, 4>, 4>& worldToCamera,
                                        const std::array<std::array<double, 4>, 4>& worldToNDC);
 
+/// The smallest bound accepted for ExrExportOptions::maxDeviation and
+/// ExrImportOptions::maxLinearError. Depths and visibilities pass through
+/// float32, which resolves a visibility near 1 to 2^-24 (about 6e-8) and
+/// carries errors of a few 1e-7 through a pixel's samples: a tighter bound
+/// cannot be kept, and chasing it only multiplies samples (memory) and chord
+/// vertices (time) without end.
+inline constexpr double kMinExrErrorBound = 1e-6;
+
 struct ExrExportOptions {
     /// Mip level of the map to export (0 = full resolution).
     unsigned level = 0;
@@ -86,7 +94,8 @@ struct ExrExportOptions {
     std::uint32_t tileSize = 64;
     /// Bound on |T_exr(z) - V(z)| from the exponential interpretation of volume
     /// samples. 0 chooses clamp(tolerance / 2, 1e-5, 1e-3) from the exported
-    /// level's tolerance.
+    /// level's tolerance; otherwise in [kMinExrErrorBound, 1] (NaN and values
+    /// outside are refused with ErrorCode::argument).
     double maxDeviation = 0.0;
 };
 
@@ -118,10 +127,11 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
 
 struct ExrImportOptions {
     /// Compression tolerance. < 0 uses the file's dsm:tolerance when present,
-    /// else kDefaultExrImportTolerance.
+    /// else kDefaultExrImportTolerance; NaN and infinity are refused.
     double tolerance = -1.0;
     /// Bound on the linearisation of exponential volume samples. <= 0 uses
-    /// clamp(tolerance / 4, 1e-5, 1e-3).
+    /// clamp(tolerance / 4, 1e-5, 1e-3); otherwise in [kMinExrErrorBound, 1]
+    /// (NaN and values outside are refused with ErrorCode::argument).
     double maxLinearError = 0.0;
     /// The light camera; when empty it comes from the file (dsm:* attributes,
     /// else worldToCamera and worldToNDC).

@@ -45,10 +45,10 @@ struct WriterOptions {
 /// by the sweep, then recompression). Memory holds only the partly built
 /// coarser tiles: about half a row of level-0 tiles in row order.
 ///
-/// Output goes to a temporary file beside `path`, renamed to `path` by
-/// finish(). If finish() is not reached (an error, an exception, a crash) no
-/// file named `path` is created or replaced; the destructor removes the
-/// temporary file.
+/// Output goes through an OutputFile (dsm/output_file.h): a temporary file
+/// beside `path`, synced and renamed to `path` by finish(). If finish() is not
+/// reached (an error, an exception, a crash) no file named `path` is created
+/// or replaced; the destructor removes the temporary file.
 class MapWriter {
 public:
     /// Opens the temporary file. Throws dsm::Error for bad options or I/O.
