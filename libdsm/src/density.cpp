@@ -181,7 +181,8 @@ openvdb::FloatGrid::ConstPtr loadFloatGrid(const VdbDensity& vdb) {
     initializeOpenVdb();
     const std::string where = "VDB file '" + vdb.file + "'";
     std::error_code ec;
-    if (!std::filesystem::is_regular_file(vdb.file, ec)) throw Error(where + ": does not exist or is not a file");
+    if (!std::filesystem::is_regular_file(vdb.file, ec))
+        throw Error(ErrorCode::io, where + ": does not exist or is not a file");
     openvdb::GridBase::Ptr base;
     try {
         openvdb::io::File file(vdb.file);
@@ -191,19 +192,21 @@ openvdb::FloatGrid::ConstPtr loadFloatGrid(const VdbDensity& vdb) {
             for (auto it = file.beginName(); it != file.endName(); ++it)
                 names += (names.empty() ? "'" : ", '") + *it + "'";
             file.close();
-            throw Error(where + ": has no grid '" + vdb.grid + "' (grids: " + (names.empty() ? "none" : names) + ")");
+            throw Error(ErrorCode::scene,
+                        where + ": has no grid '" + vdb.grid + "' (grids: " + (names.empty() ? "none" : names) + ")");
         }
         base = file.readGrid(vdb.grid);
         file.close();
     } catch (const openvdb::Exception& e) {
-        throw Error(where + ": " + e.what());
+        throw Error(ErrorCode::io, where + ": " + e.what());
     } catch (const std::exception& e) {
         if (dynamic_cast<const Error*>(&e)) throw;
-        throw Error(where + ": " + e.what());
+        throw Error(ErrorCode::io, where + ": " + e.what());
     }
     openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
     if (!grid)
-        throw Error(where + ": grid '" + vdb.grid + "' holds " + base->valueType() + " values; expected a float grid");
+        throw Error(ErrorCode::scene,
+                    where + ": grid '" + vdb.grid + "' holds " + base->valueType() + " values; expected a float grid");
     return grid;
 }
 
@@ -231,7 +234,8 @@ std::unique_ptr<DensityField> makeDensityField(const Volume& volume) {
     for (std::size_t i = 0; i < 3; ++i)
         if (!(volume.boundsMin[i] < volume.boundsMax[i]) || !std::isfinite(volume.boundsMin[i]) ||
             !std::isfinite(volume.boundsMax[i]))
-            throw Error(detail::concat("volume: bounds [", volume.boundsMin[i], ", ", volume.boundsMax[i], "] on axis ",
+            throw Error(ErrorCode::scene,
+                        detail::concat("volume: bounds [", volume.boundsMin[i], ", ", volume.boundsMax[i], "] on axis ",
                                        i, " are empty or not finite"));
     if (const auto* h = std::get_if<HomogeneousDensity>(&volume.density))
         return std::make_unique<HomogeneousField>(volume, *h);
@@ -244,7 +248,8 @@ std::unique_ptr<DensityField> makeDensityField(const Volume& volume) {
 void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
     const openvdb::FloatGrid::ConstPtr grid = loadFloatGrid(vdb);
     const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
-    if (box.empty()) throw Error("VDB file '" + vdb.file + "': grid '" + vdb.grid + "' has no active voxels");
+    if (box.empty())
+        throw Error(ErrorCode::scene, "VDB file '" + vdb.file + "': grid '" + vdb.grid + "' has no active voxels");
     const openvdb::Vec3d lo = box.min().asVec3d() - openvdb::Vec3d(1.0), hi = box.max().asVec3d() + openvdb::Vec3d(1.0);
     boundsMin = {HUGE_VAL, HUGE_VAL, HUGE_VAL};
     boundsMax = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};

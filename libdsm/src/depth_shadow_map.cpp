@@ -25,7 +25,8 @@ DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions&
     map.width_ = options.width ? options.width : scene.light.width;
     map.height_ = options.height ? options.height : scene.light.height;
     if (map.width_ == 0 || map.height_ == 0 || map.width_ > (1u << 17) || map.height_ > (1u << 17))
-        throw Error(concat("depth shadow map: size ", map.width_, "x", map.height_, " is empty or too large"));
+        throw Error(ErrorCode::argument,
+                    concat("depth shadow map: size ", map.width_, "x", map.height_, " is empty or too large"));
     LightDescription light = scene.light;
     light.width = map.width_;
     light.height = map.height_;
@@ -112,7 +113,7 @@ std::uint64_t DepthShadowMap::writeExr(const std::string& path) const {
     const std::string temporary = path + ".tmp-depth";
     {
         auto out = OIIO::ImageOutput::create(path);
-        if (!out) throw Error(concat("'", path, "': cannot write: ", OIIO::geterror()));
+        if (!out) throw Error(ErrorCode::io, concat("'", path, "': cannot write: ", OIIO::geterror()));
         OIIO::ImageSpec spec(static_cast<int>(width_), static_cast<int>(height_), 1, OIIO::TypeDesc::FLOAT);
         spec.channelnames = {"Z"};
         spec.attribute("compression", "zip");
@@ -120,14 +121,14 @@ std::uint64_t DepthShadowMap::writeExr(const std::string& path) const {
         if (!out->open(temporary, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, depth_.data()) || !out->close()) {
             std::error_code ignored;
             std::filesystem::remove(temporary, ignored);
-            throw Error(concat("'", path, "': cannot write: ", out->geterror()));
+            throw Error(ErrorCode::io, concat("'", path, "': cannot write: ", out->geterror()));
         }
     }
     std::error_code error;
     std::filesystem::rename(temporary, path, error);
     if (error) {
         std::filesystem::remove(temporary, error);
-        throw Error(concat("'", path, "': cannot rename the finished file into place"));
+        throw Error(ErrorCode::io, concat("'", path, "': cannot rename the finished file into place"));
     }
     return std::filesystem::file_size(path);
 }

@@ -22,8 +22,8 @@ namespace {
 const LevelInfo& levelOf(const DeepShadowMap& map, unsigned level) {
     const auto& levels = map.info().levels;
     if (level >= levels.size())
-        throw Error(concat("'", map.path(), "': level ", level, " does not exist (", levels.size(),
-                           levels.size() == 1 ? " level)" : " levels)"));
+        throw Error(ErrorCode::argument, concat("'", map.path(), "': level ", level, " does not exist (", levels.size(),
+                                                levels.size() == 1 ? " level)" : " levels)"));
     return levels[level];
 }
 
@@ -60,7 +60,7 @@ FloatImage visibilityAt(const DeepShadowMap& map, unsigned level, double z) {
 }  // namespace
 
 FloatImage visibilitySlice(const DeepShadowMap& map, unsigned level, double z) {
-    if (std::isnan(z)) throw Error(concat("'", map.path(), "': slice depth is NaN"));
+    if (std::isnan(z)) throw Error(ErrorCode::argument, concat("'", map.path(), "': slice depth is NaN"));
     return visibilityAt(map, level, z);
 }
 
@@ -81,7 +81,8 @@ FloatImage vertexCountImage(const DeepShadowMap& map, unsigned level) {
 
 FloatImage colourRamp(const FloatImage& image, float maximum) {
     if (image.channels != 1)
-        throw Error(concat("colour ramp: expected a one-channel image, got ", image.channels, " channels"));
+        throw Error(ErrorCode::argument,
+                    concat("colour ramp: expected a one-channel image, got ", image.channels, " channels"));
     // Luminance rises along the ramp, so it still reads in grey.
     static constexpr std::array<std::array<float, 3>, 5> kStops{{
         {0.0f, 0.0f, 0.0f},

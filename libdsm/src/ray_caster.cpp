@@ -354,8 +354,8 @@ RayCaster::RayCaster(const Scene& scene) : impl_(std::make_unique<Impl>()) {
                     for (const auto& tri : g.triangles) {
                         for (std::uint32_t k : tri)
                             if (k >= g.positions.size())
-                                throw Error(detail::concat(what, ": triangle index ", k, " beyond ", g.positions.size(),
-                                                           " positions"));
+                                throw Error(ErrorCode::scene, detail::concat(what, ": triangle index ", k, " beyond ",
+                                                                             g.positions.size(), " positions"));
                         auto world = [&](std::uint32_t k) {
                             const auto& p = g.positions[k];
                             return transformPoint(toWorld, Vec3{p[0], p[1], p[2]});
@@ -375,8 +375,8 @@ RayCaster::RayCaster(const Scene& scene) : impl_(std::make_unique<Impl>()) {
                     std::size_t first = 0;
                     for (std::uint32_t n : g.pointsPerCurve) {
                         if (first + n > g.points.size())
-                            throw Error(detail::concat(what, ": curves need ", first + n, " points, have ",
-                                                       g.points.size()));
+                            throw Error(ErrorCode::scene, detail::concat(what, ": curves need ", first + n,
+                                                                         " points, have ", g.points.size()));
                         for (std::uint32_t k = 0; k + 1 < n; ++k) {
                             auto point = [&](std::size_t i) {
                                 const auto& p = g.points[i];
@@ -400,13 +400,14 @@ RayCaster::RayCaster(const Scene& scene) : impl_(std::make_unique<Impl>()) {
                     v.field = makeDensityField(g);
                     v.scale = g.scale;
                     v.step = g.step;
-                    if (!(g.step > 0.0)) throw Error(detail::concat(what, ": volume step ", g.step, " is not > 0"));
+                    if (!(g.step > 0.0))
+                        throw Error(ErrorCode::scene, detail::concat(what, ": volume step ", g.step, " is not > 0"));
                     s.volumes.push_back(std::move(v));
                 }
             },
             object.geometry);
     }
-    if (s.primitives.size() > UINT32_MAX / 2) throw Error("scene: too many primitives");
+    if (s.primitives.size() > UINT32_MAX / 2) throw Error(ErrorCode::limit, "scene: too many primitives");
     s.build();
 }
 
@@ -435,7 +436,7 @@ void RayCaster::surfaceHits(const Vec3& origin, const Vec3& direction, double ti
                 s.intersect(p, o, direction, tMin, out);
             }
         } else {
-            if (top + 2 > 128) throw Error("ray caster: hierarchy deeper than 128 levels");
+            if (top + 2 > 128) throw Error(ErrorCode::limit, "ray caster: hierarchy deeper than 128 levels");
             stack[top++] = node.right;
             stack[top++] = node.first;
         }
@@ -493,8 +494,8 @@ void RayCaster::volumeSamples(const Vec3& origin, const Vec3& direction, double 
             const double length = spans[i].t1 - spans[i].t0;
             const auto steps = static_cast<std::uint64_t>(std::ceil(length / dt));
             if (steps > 10'000'000)
-                throw Error(detail::concat("volume of object ", spans[i].volume->object, ": ", steps,
-                                           " steps along one ray; raise its step"));
+                throw Error(ErrorCode::limit, detail::concat("volume of object ", spans[i].volume->object, ": ", steps,
+                                                             " steps along one ray; raise its step"));
             for (std::uint64_t k = 0; k < steps; ++k) ts.push_back(spans[i].t0 + static_cast<double>(k) * dt);
             ts.push_back(spans[i].t1);
         }

@@ -124,7 +124,8 @@ public:
     Parser(std::string name, std::string baseDirectory) : name_(std::move(name)), base_(std::move(baseDirectory)) {}
 
     [[noreturn]] void fail(const std::string& path, const std::string& message) const {
-        throw Error(detail::concat("scene '", name_, "': ", path.empty() ? std::string() : path + ": ", message));
+        throw Error(ErrorCode::scene,
+                    detail::concat("scene '", name_, "': ", path.empty() ? std::string() : path + ": ", message));
     }
     [[noreturn]] void expected(const std::string& path, const std::string& what, const json& got) const {
         fail(path, "expected " + what + ", got " + describe(got));
@@ -762,7 +763,7 @@ bool Scene::isColoured() const {
 }
 
 LightCamera lightCamera(const LightDescription& light) {
-    auto fail = [](const std::string& m) -> void { throw Error("light: " + m); };
+    auto fail = [](const std::string& m) -> void { throw Error(ErrorCode::scene, "light: " + m); };
     const Vec3 f = normalized(light.direction);
     if (!std::isfinite(f[0]) || !std::isfinite(f[1]) || !std::isfinite(f[2]))
         fail("the direction is zero or not finite");
@@ -858,7 +859,7 @@ Curves generateHairBall(const HairBallParameters& h) {
 }
 
 Curves loadHairFile(const std::string& path) {
-    auto fail = [&](const std::string& m) -> void { throw Error("hair file '" + path + "': " + m); };
+    auto fail = [&](const std::string& m) -> void { throw Error(ErrorCode::scene, "hair file '" + path + "': " + m); };
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) fail("does not exist or is not a file");
     std::ifstream in(path, std::ios::binary);
@@ -945,11 +946,11 @@ Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, 
 Scene loadScene(const std::string& path) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec))
-        throw Error("scene '" + path + "': does not exist or is not a file");
+        throw Error(ErrorCode::io, "scene '" + path + "': does not exist or is not a file");
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error("scene '" + path + "': cannot open: " + std::strerror(errno));
+    if (!in) throw Error(ErrorCode::io, "scene '" + path + "': cannot open: " + std::strerror(errno));
     const std::string text{std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
-    if (in.bad()) throw Error("scene '" + path + "': read error");
+    if (in.bad()) throw Error(ErrorCode::io, "scene '" + path + "': read error");
     return parseScene(text, std::filesystem::path(path).parent_path().string(), path);
 }
 

@@ -55,7 +55,7 @@ struct MapWriter::Impl {
 
     void writeBytes(const std::uint8_t* data, std::size_t size) {
         if (size > 0 && std::fwrite(data, 1, size, file) != size)
-            throw Error(concat(where(), ": write failed: ", std::strerror(errno)));
+            throw Error(ErrorCode::io, concat(where(), ": write failed: ", std::strerror(errno)));
         offset += size;
     }
 
@@ -137,7 +137,9 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : im
     s.path = path;
     s.options = options;
     const std::string where = s.where();
-    auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    auto fail = [&](const std::string& what, ErrorCode code = ErrorCode::argument) {
+        throw Error(code, concat(where, ": ", what));
+    };
     if (options.width == 0 || options.height == 0 || options.width > (1u << 17) || options.height > (1u << 17))
         fail(concat("image size ", options.width, "x", options.height, " is not in [1, 131072]"));
     if (options.tileSize < format::kMinTileSize || options.tileSize > format::kMaxTileSize ||
@@ -186,14 +188,14 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : im
     std::vector<char> name(pattern.begin(), pattern.end());
     name.push_back('\0');
     const int fd = ::mkstemp(name.data());
-    if (fd < 0) fail(concat("cannot create a temporary file beside it: ", std::strerror(errno)));
+    if (fd < 0) fail(concat("cannot create a temporary file beside it: ", std::strerror(errno)), ErrorCode::io);
     s.temporaryPath = name.data();
     ::fchmod(fd, 0644);  // mkstemp creates 0600; a map is meant to be shared like any image
     s.file = ::fdopen(fd, "wb");
     if (!s.file) {
         ::close(fd);
         std::remove(s.temporaryPath.c_str());
-        fail(concat("cannot open the temporary file: ", std::strerror(errno)));
+        fail(concat("cannot open the temporary file: ", std::strerror(errno)), ErrorCode::io);
     }
     const std::vector<std::uint8_t> placeholder(format::kHeaderSize, 0);
     s.writeBytes(placeholder.data(), placeholder.size());
@@ -218,27 +220,30 @@ std::uint32_t MapWriter::tileHeight(std::uint32_t ty) const {
 void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const VisibilityFunction> pixels) {
     Impl& s = *impl_;
     const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
-    if (s.finished) throw Error(concat(where, ": the file is already finished"));
+    if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
     if (tx >= tilesX() || ty >= tilesY())
-        throw Error(concat(where, ": outside the ", tilesX(), "x", tilesY(), " tiles of the map"));
-    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx]) throw Error(concat(where, ": written twice"));
+        throw Error(ErrorCode::argument, concat(where, ": outside the ", tilesX(), "x", tilesY(), " tiles of the map"));
+    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx])
+        throw Error(ErrorCode::argument, concat(where, ": written twice"));
     const std::uint32_t w = tileWidth(tx), h = tileHeight(ty);
     if (pixels.size() != std::size_t(w) * h)
-        throw Error(concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
+        throw Error(ErrorCode::argument, concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
     for (std::size_t p = 0; p < pixels.size(); ++p) {
         const VisibilityFunction& f = pixels[p];
         const std::string pixelWhere =
             concat(where, " pixel ", tx * s.options.tileSize + p % w, ",", ty * s.options.tileSize + p / w, ": ");
         if (f.channels() > s.options.channels)
-            throw Error(concat(pixelWhere, "RGB function in a monochrome map"));
+            throw Error(ErrorCode::argument, concat(pixelWhere, "RGB function in a monochrome map"));
         if (s.options.counts && !f.hasCounts() && !f.empty())
-            throw Error(concat(pixelWhere, "the map stores sample counts but the function has none"));
+            throw Error(ErrorCode::argument,
+                        concat(pixelWhere, "the map stores sample counts but the function has none"));
         if (static_cast<int>(f.layerCount()) > s.options.maxLayers)
-            throw Error(concat(pixelWhere, f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
+            throw Error(ErrorCode::argument,
+                        concat(pixelWhere, f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
         try {
             f.validate();
         } catch (const Error& e) {
-            throw Error(pixelWhere + e.what());
+            throw Error(e.code(), pixelWhere + e.what());
         }
     }
     std::vector<VisibilityFunction> copy(pixels.begin(), pixels.end());
@@ -247,11 +252,12 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const Vi
 
 void MapWriter::finish() {
     Impl& s = *impl_;
-    if (s.finished) throw Error(concat(s.where(), ": finish() called twice"));
+    if (s.finished) throw Error(ErrorCode::argument, concat(s.where(), ": finish() called twice"));
     for (std::uint32_t ty = 0; ty < tilesY(); ++ty)
         for (std::uint32_t tx = 0; tx < tilesX(); ++tx)
             if (!s.levels[0].written[std::size_t(ty) * tilesX() + tx])
-                throw Error(concat(s.where(), ": level 0 tile ", tx, ",", ty, " was never written"));
+                throw Error(ErrorCode::argument,
+                            concat(s.where(), ": level 0 tile ", tx, ",", ty, " was never written"));
 
     MapInfo info;
     info.width = s.options.width;
@@ -294,12 +300,13 @@ void MapWriter::finish() {
     if (std::fseek(s.file, 0, SEEK_SET) != 0 ||
         std::fwrite(headerBytes.data(), 1, headerBytes.size(), s.file) != headerBytes.size() ||
         std::fflush(s.file) != 0 || ::fsync(::fileno(s.file)) != 0)
-        throw Error(concat(s.where(), ": write failed: ", std::strerror(errno)));
+        throw Error(ErrorCode::io, concat(s.where(), ": write failed: ", std::strerror(errno)));
     const int closed = std::fclose(s.file);
     s.file = nullptr;
-    if (closed != 0) throw Error(concat(s.where(), ": close failed: ", std::strerror(errno)));
+    if (closed != 0) throw Error(ErrorCode::io, concat(s.where(), ": close failed: ", std::strerror(errno)));
     if (std::rename(s.temporaryPath.c_str(), s.path.c_str()) != 0)
-        throw Error(concat(s.where(), ": cannot rename the finished file into place: ", std::strerror(errno)));
+        throw Error(ErrorCode::io,
+                    concat(s.where(), ": cannot rename the finished file into place: ", std::strerror(errno)));
     s.finished = true;
 }
 

@@ -178,7 +178,7 @@ int main(int argc, char** argv) {
         std::ofstream statsOut;
         if (!statsJson.empty()) {
             statsOut.open(statsJson);
-            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
+            if (!statsOut) throw dsm::Error(dsm::ErrorCode::io, "cannot write statistics to '" + statsJson + "'");
         }
         dsm::Scene scene;
         if (scenePath == "-") {
@@ -229,7 +229,7 @@ int main(int argc, char** argv) {
                                 {"sample_vertices", s.sampleVertices}};
             statsOut << j.dump(2) << "\n";
             statsOut.flush();
-            if (!statsOut) throw dsm::Error("cannot write statistics to '" + statsJson + "'");
+            if (!statsOut) throw dsm::Error(dsm::ErrorCode::io, "cannot write statistics to '" + statsJson + "'");
             statsDone = true;
         }
     } catch (const dsm::Error& e) {
