@@ -125,7 +125,8 @@ DSM_C_API dsm_result dsm_map_open(const char* path, const dsm_open_options* opti
  *  unchanged until dsm_map_close. `name` is what messages call the map (may be NULL). */
 DSM_C_API dsm_result dsm_map_open_memory(const void* data, size_t size, const char* name,
                                          const dsm_open_options* options, dsm_map** map);
-/** Opens a map read through callbacks. `release` is called even when this fails. */
+/** Opens a map read through callbacks. `release` is called even when this fails
+ *  (unless callbacks->size is too small to trust the struct). */
 DSM_C_API dsm_result dsm_map_open_callbacks(const dsm_read_callbacks* callbacks, const char* name,
                                             const dsm_open_options* options, dsm_map** map);
 DSM_C_API void dsm_map_close(dsm_map* map);
