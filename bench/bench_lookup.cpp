@@ -115,7 +115,7 @@ Config parseConfig(int& argc, char** argv) {
             else if (f == "gaussian")
                 c.buildFilter = PixelFilter::Gaussian;
             else
-                throw Error("--build-filter: box, triangle or gaussian");
+                throw Error(ErrorCode::argument, "--build-filter: box, triangle or gaussian");
         } else if (const char* v7 = value("--build-width="))
             c.buildWidth = std::stod(v7);
         else if (a == "--keep-maps")
@@ -144,7 +144,7 @@ struct TempDir {
     bool keep = false;
     TempDir() {
         std::string pattern = (fs::temp_directory_path() / "dsm-bench-lookup-XXXXXX").string();
-        if (!mkdtemp(pattern.data())) throw Error("cannot create a temporary directory");
+        if (!mkdtemp(pattern.data())) throw Error(ErrorCode::io, "cannot create a temporary directory");
         path = pattern;
     }
     ~TempDir() {
@@ -317,7 +317,7 @@ Inputs makeInputs(const DeepShadowMap& map, const Scene& scene, const Config& cf
                 in.footprintVertices += f.size();
             }
         }
-    if (in.footprint.empty()) throw Error("the map is empty where the hair is");
+    if (in.footprint.empty()) throw Error(ErrorCode::argument, "the map is empty where the hair is");
     for (const auto& p : in.footprint) {
         const std::size_t idx = std::size_t(p[1]) * in.W + p[0];
         in.zlo = std::min(in.zlo, double(in.hair.zmin[idx]));

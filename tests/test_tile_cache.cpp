@@ -301,7 +301,7 @@ TEST(TileCache, LoaderExceptionPropagatesAndCachesNothing) {
     const std::uint64_t f = cache->impl().newFileId();
     const TileKey k{f, 2, 7};
     get(*cache, {f, 0, 0}, 100);
-    const auto failing = []() -> LoadedTile { throw dsm::Error("bad tile"); };
+    const auto failing = []() -> LoadedTile { throw dsm::Error(dsm::ErrorCode::corrupt, "bad tile"); };
     EXPECT_THROW(cache->impl().get<TestTile>(k, failing), dsm::Error);
     EXPECT_THROW(cache->impl().get<TestTile>(k, [] () -> LoadedTile { throw std::runtime_error("io"); }),
                  std::runtime_error);
@@ -475,7 +475,7 @@ TEST(TileCache, ConcurrentGetsAreConsistent) {
             const std::size_t bytes = sizeOf(k);
             try {
                 auto t = cache->impl().get<TestTile>(k, [&, k, bytes, fails]() {
-                    if (fails) throw dsm::Error("unreadable tile");
+                    if (fails) throw dsm::Error(dsm::ErrorCode::corrupt, "unreadable tile");
                     LoadedTile lt = loaderFor(k, bytes)();
                     ++loads;
                     loadedFileBytes += lt.fileBytes;

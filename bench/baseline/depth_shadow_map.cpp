@@ -26,7 +26,8 @@ DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions&
     map.width_ = options.width ? options.width : scene.light.width;
     map.height_ = options.height ? options.height : scene.light.height;
     if (map.width_ == 0 || map.height_ == 0 || map.width_ > (1u << 17) || map.height_ > (1u << 17))
-        throw Error(concat("depth shadow map: size ", map.width_, "x", map.height_, " is empty or too large"));
+        throw Error(ErrorCode::argument,
+                    concat("depth shadow map: size ", map.width_, "x", map.height_, " is empty or too large"));
     LightDescription light = scene.light;
     light.width = map.width_;
     light.height = map.height_;

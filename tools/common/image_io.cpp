@@ -40,7 +40,8 @@ std::unique_ptr<OIIO::ImageOutput> outputFor(const std::string& path) {
     auto out = OIIO::ImageOutput::create(path);
     if (!out) {
         (void)OIIO::geterror();  // clear it; it would only repeat the file name
-        throw Error(concat(where(path), ": OpenImageIO knows no image format for the extension '",
+        throw Error(ErrorCode::unsupported,
+                    concat(where(path), ": OpenImageIO knows no image format for the extension '",
                            fs::path(path).extension().string(), "'"));
     }
     return out;
@@ -113,11 +114,14 @@ bool imageFormatKeepsFloats(const std::string& path) { return keepsFloats(*outpu
 
 void writeImage(const std::string& path, const FloatImage& image) {
     if (image.width == 0 || image.height == 0)
-        throw Error(concat(where(path), ": cannot write an empty image (", image.width, " x ", image.height, ")"));
+        throw Error(ErrorCode::argument,
+                    concat(where(path), ": cannot write an empty image (", image.width, " x ", image.height, ")"));
     if (image.channels < 1 || image.channels > 4)
-        throw Error(concat(where(path), ": cannot write an image of ", image.channels, " channels (1 to 4)"));
+        throw Error(ErrorCode::argument,
+                    concat(where(path), ": cannot write an image of ", image.channels, " channels (1 to 4)"));
     if (image.values.size() != static_cast<std::size_t>(image.width) * image.height * static_cast<std::size_t>(image.channels))
-        throw Error(concat(where(path), ": image holds ", image.values.size(), " values, not width * height * channels"));
+        throw Error(ErrorCode::argument, concat(where(path), ": image holds ", image.values.size(),
+                                                " values, not width * height * channels"));
 
     auto out = outputFor(path);
     const bool floats = keepsFloats(*out);
@@ -151,13 +155,13 @@ void writeImage(const std::string& path, const FloatImage& image) {
 
 FloatImage readImage(const std::string& path) {
     auto in = OIIO::ImageInput::open(path);
-    if (!in) throw Error(concat(where(path), ": cannot read image: ", oneLine(OIIO::geterror())));
+    if (!in) throw Error(ErrorCode::io, concat(where(path), ": cannot read image: ", oneLine(OIIO::geterror())));
     const OIIO::ImageSpec& spec = in->spec();
     if (spec.width <= 0 || spec.height <= 0 || spec.nchannels <= 0)
-        throw Error(concat(where(path), ": empty image"));
+        throw Error(ErrorCode::corrupt, concat(where(path), ": empty image"));
     FloatImage image(static_cast<std::uint32_t>(spec.width), static_cast<std::uint32_t>(spec.height), spec.nchannels);
     if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.values.data()))
-        throw Error(concat(where(path), ": cannot read image: ", oneLine(in->geterror())));
+        throw Error(ErrorCode::io, concat(where(path), ": cannot read image: ", oneLine(in->geterror())));
     return image;
 }
 

@@ -324,8 +324,8 @@ std::vector<unsigned> selectedLevels(const dsm::DeepShadowMap& map, const std::o
     const auto count = static_cast<unsigned>(map.info().levels.size());
     if (level) {
         if (*level >= count)
-            throw dsm::Error("level " + std::to_string(*level) + " does not exist (" +
-                             plural(count, "level", "levels") + ")");
+            throw dsm::Error(dsm::ErrorCode::argument, "level " + std::to_string(*level) + " does not exist (" +
+                                                           plural(count, "level", "levels") + ")");
         return {*level};
     }
     std::vector<unsigned> all(count);
@@ -405,13 +405,14 @@ std::vector<std::size_t> vertexLayers(const dsm::VisibilityView& f) {
 dsm::PixelFunction readPixel(const dsm::DeepShadowMap& map, unsigned level, const PixelCoordinates& p) {
     const auto& levels = map.info().levels;
     if (level >= levels.size())
-        throw dsm::Error("level " + std::to_string(level) + " does not exist (" +
-                         plural(levels.size(), "level", "levels") + ")");
+        throw dsm::Error(dsm::ErrorCode::argument, "level " + std::to_string(level) + " does not exist (" +
+                                                       plural(levels.size(), "level", "levels") + ")");
     const dsm::LevelInfo& L = levels[level];
     if (p.x >= L.width || p.y >= L.height)
-        throw dsm::Error("pixel " + std::to_string(p.x) + "," + std::to_string(p.y) + " is outside level " +
-                         std::to_string(level) + " (" + std::to_string(L.width) + " x " + std::to_string(L.height) +
-                         ")");
+        throw dsm::Error(dsm::ErrorCode::argument, "pixel " + std::to_string(p.x) + "," + std::to_string(p.y) +
+                                                       " is outside level " + std::to_string(level) + " (" +
+                                                       std::to_string(L.width) + " x " + std::to_string(L.height) +
+                                                       ")");
     return map.pixel(level, p.x, p.y);
 }
 

@@ -132,8 +132,8 @@ struct Answer {
 class QueryMode {
 public:
     virtual ~QueryMode() = default;
-    /// Throws dsm::Error: naming the map when the map is at fault, without
-    /// the map's name when the point is (see isMapError()).
+    /// Throws dsm::Error: ErrorCode::argument when the point is at fault,
+    /// another code when the map is.
     virtual Answer answer(const std::array<double, 3>& point) = 0;
 };
 
@@ -327,7 +327,9 @@ public:
             writer_.answer(key, index, mode_.answer(p));
             return std::nullopt;
         } catch (const dsm::Error& e) {
-            if (isMapError(e.what(), mapPath_)) throw;
+            // A point or option out of range is the query's problem; anything
+            // else (a damaged or unreadable map) stops the run.
+            if (e.code() != dsm::ErrorCode::argument) throw;
             return std::string(e.what());
         }
     }

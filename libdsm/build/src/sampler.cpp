@@ -103,18 +103,20 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     const std::uint32_t W = light.width, H = light.height;
     const std::string where = concat("build '", path, "'");
     checkOutputPath(path);  // before the work, not after it
-    if (W == 0 || H == 0) throw Error(concat(where, ": resolution ", W, "x", H, " is empty"));
+    if (W == 0 || H == 0) throw Error(ErrorCode::argument, concat(where, ": resolution ", W, "x", H, " is empty"));
     if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
-        throw Error(concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
+        throw Error(ErrorCode::argument,
+                    concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
     if (!std::isfinite(options.filterWidth) || options.filterWidth <= 0.0 || options.filterWidth > 64.0)
-        throw Error(concat(where, ": filter width ", options.filterWidth, " is not in (0, 64]"));
+        throw Error(ErrorCode::argument, concat(where, ": filter width ", options.filterWidth, " is not in (0, 64]"));
     if (options.mtsmLayers < 1 || options.mtsmLayers > 255)
-        throw Error(concat(where, ": MTSM layer count ", options.mtsmLayers, " is not in [1, 255]"));
+        throw Error(ErrorCode::argument,
+                    concat(where, ": MTSM layer count ", options.mtsmLayers, " is not in [1, 255]"));
     std::array<std::uint32_t, 4> region = options.region;
     if (region == std::array<std::uint32_t, 4>{0, 0, 0, 0}) region = {0, 0, W, H};
     if (region[0] >= region[2] || region[1] >= region[3] || region[2] > W || region[3] > H)
-        throw Error(concat(where, ": region ", region[0], ",", region[1], ",", region[2], ",", region[3],
-                           " is empty or outside the ", W, "x", H, " image"));
+        throw Error(ErrorCode::argument, concat(where, ": region ", region[0], ",", region[1], ",", region[2], ",",
+                                                region[3], " is empty or outside the ", W, "x", H, " image"));
 
     const LightCamera camera = lightCamera(light);
     const detail::LightRayFrame frame = detail::lightRayFrame(camera, W, H);
@@ -122,7 +124,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     const bool counts = options.counts || options.mtsmLayers > 1;
     const std::uint32_t spp = options.samplesPerPixel;
     const double tolerance = options.tolerance < 0.0 ? autoTolerance(spp) : options.tolerance;
-    if (!std::isfinite(tolerance)) throw Error(concat(where, ": tolerance ", tolerance, " is not finite"));
+    if (!std::isfinite(tolerance))
+        throw Error(ErrorCode::argument, concat(where, ": tolerance ", tolerance, " is not finite"));
     const double radius = 0.5 * options.filterWidth;
     const int reach = std::max(0, static_cast<int>(std::ceil(radius - 0.5)));  // neighbour pixels with samples in range
     const std::uint32_t gridY = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(spp)))));
@@ -261,7 +264,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
                 try {
                     f = buildVisibility(rays, weights, compression, &stats.timings);
                 } catch (const Error& e) {
-                    throw Error(concat(where, ": pixel ", x, ",", y, ": ", e.what()));
+                    throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                 }
                 stats.vertices += f.size();
                 stats.maxVertices = std::max(stats.maxVertices, static_cast<std::uint32_t>(f.size()));

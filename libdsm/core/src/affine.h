@@ -50,7 +50,8 @@ inline double determinant3(const Affine& m) {
 /// singular" when it has none.
 inline Affine inverseAffine(const Affine& m, const std::string& what) {
     const double det = determinant3(m);
-    if (!(std::abs(det) > 1e-300) || !std::isfinite(det)) throw Error(concat(what, ": the transform is singular"));
+    if (!(std::abs(det) > 1e-300) || !std::isfinite(det))
+        throw Error(ErrorCode::argument, concat(what, ": the transform is singular"));
     const double id = 1.0 / det;
     Affine r{};
     r[0] = (m[5] * m[10] - m[6] * m[9]) * id;

@@ -62,7 +62,7 @@ VisibilityFunction buildVisibility(std::span<const SampleRay> rays, std::span<co
             try {
                 taus.push_back(transmittance(rays[k], options.channels, options.keepCounts, zStart));
             } catch (const Error& e) {
-                throw Error(detail::concat("ray ", k, ": ", e.what()));
+                throw Error(e.code(), detail::concat("ray ", k, ": ", e.what()));
             }
             if (timings) timings->transmittanceVertices += taus.back().size();
         }

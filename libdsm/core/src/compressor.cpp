@@ -249,17 +249,18 @@ struct Compressor::Impl {
     void validate(float z, const double* v) {
         const auto index = inputIndex;
         if (!std::isfinite(z) || z < 0.0f)
-            throw Error(detail::concat("compressor: input vertex ", index, ": depth ", z,
-                                       " is not a finite value >= 0"));
+            throw Error(ErrorCode::argument, detail::concat("compressor: input vertex ", index, ": depth ", z,
+                                                            " is not a finite value >= 0"));
         if (inputIndex > 0 && z < previousZ)
-            throw Error(detail::concat("compressor: input vertex ", index, ": depth ", z,
-                                       " is less than the previous depth ", previousZ));
+            throw Error(ErrorCode::argument, detail::concat("compressor: input vertex ", index, ": depth ", z,
+                                                            " is less than the previous depth ", previousZ));
         for (int c = 0; c < options.channels; ++c) {
             if (!(v[c] >= 0.0 && v[c] <= 1.0))
-                throw Error(detail::concat("compressor: input vertex ", index, " channel ", c, ": visibility ", v[c],
-                                           " is outside [0, 1]"));
+                throw Error(ErrorCode::argument, detail::concat("compressor: input vertex ", index, " channel ", c,
+                                                                ": visibility ", v[c], " is outside [0, 1]"));
             if (haveLayerInput && v[c] > previousV[c])
-                throw Error(detail::concat("compressor: input vertex ", index, " channel ", c, ": visibility ", v[c],
+                throw Error(ErrorCode::argument,
+                            detail::concat("compressor: input vertex ", index, " channel ", c, ": visibility ", v[c],
                                            " increases from the previous ", previousV[c]));
         }
     }
@@ -294,11 +295,14 @@ struct Compressor::Impl {
 
 Compressor::Compressor(const CompressorOptions& options) {
     if (options.channels != 1 && options.channels != kMaxChannels)
-        throw Error(detail::concat("compressor: channel count ", options.channels, " is not 1 or 3"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("compressor: channel count ", options.channels, " is not 1 or 3"));
     if (!(options.tolerance >= 0.0) || std::isnan(options.tolerance))
-        throw Error(detail::concat("compressor: tolerance ", options.tolerance, " is not a value >= 0"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("compressor: tolerance ", options.tolerance, " is not a value >= 0"));
     if (options.maxLayers < 1 || options.maxLayers > 255)
-        throw Error(detail::concat("compressor: layer count ", options.maxLayers, " is not in [1, 255]"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("compressor: layer count ", options.maxLayers, " is not in [1, 255]"));
     impl_ = std::make_unique<Impl>(options);
 }
 
@@ -405,7 +409,8 @@ VisibilityFunction compress(const VisibilityFunction& input, double tolerance, b
 
 double autoTolerance(double samplesPerPixel) {
     if (!(samplesPerPixel >= 1.0) || !std::isfinite(samplesPerPixel))
-        throw Error(detail::concat("auto tolerance: samples per pixel ", samplesPerPixel, " is not a finite value >= 1"));
+        throw Error(ErrorCode::argument, detail::concat("auto tolerance: samples per pixel ", samplesPerPixel,
+                                                        " is not a finite value >= 1"));
     return 0.25 / std::sqrt(samplesPerPixel);
 }
 

@@ -18,6 +18,4 @@ const char* errorCodeName(ErrorCode code) noexcept {
 
 Error::Error(ErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
 
-Error::Error(const std::string& message) : Error(ErrorCode::internal, message) {}
-
 }  // namespace dsm

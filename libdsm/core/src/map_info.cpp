@@ -36,14 +36,19 @@ bool LightCamera::lightToRaster(const std::array<double, 3>& p, int width, int h
 
 void LightCamera::validate() const {
     for (double m : worldToLight)
-        if (!std::isfinite(m)) throw Error(detail::concat("light camera: world-to-light entry ", m, " is not finite"));
+        if (!std::isfinite(m))
+            throw Error(ErrorCode::argument,
+                        detail::concat("light camera: world-to-light entry ", m, " is not finite"));
     for (double s : screenWindow)
-        if (!std::isfinite(s)) throw Error(detail::concat("light camera: screen window value ", s, " is not finite"));
+        if (!std::isfinite(s))
+            throw Error(ErrorCode::argument, detail::concat("light camera: screen window value ", s, " is not finite"));
     if (!(screenWindow[0] < screenWindow[1]) || !(screenWindow[2] < screenWindow[3]))
-        throw Error(detail::concat("light camera: screen window [", screenWindow[0], ", ", screenWindow[1], "] x [",
+        throw Error(ErrorCode::argument,
+                    detail::concat("light camera: screen window [", screenWindow[0], ", ", screenWindow[1], "] x [",
                                    screenWindow[2], ", ", screenWindow[3], "] is empty"));
     if (!std::isfinite(nearPlane) || nearPlane < 0.0)
-        throw Error(detail::concat("light camera: near plane ", nearPlane, " is not a finite value >= 0"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("light camera: near plane ", nearPlane, " is not a finite value >= 0"));
 }
 
 std::uint32_t levelExtent(std::uint32_t fullExtent, unsigned level) {

@@ -35,25 +35,28 @@ constexpr double kCancellationLimit = 1e6;
 std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span<const double> weights,
                            int channels, VertexSink& sink) {
     if (channels != 1 && channels != kMaxChannels)
-        throw Error(detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
+        throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
     if (inputs.size() != weights.size())
-        throw Error(detail::concat("sweep: ", inputs.size(), " inputs but ", weights.size(), " weights"));
-    if (inputs.size() > UINT32_MAX) throw Error("sweep: too many inputs");
+        throw Error(ErrorCode::argument,
+                    detail::concat("sweep: ", inputs.size(), " inputs but ", weights.size(), " weights"));
+    if (inputs.size() > UINT32_MAX) throw Error(ErrorCode::argument, "sweep: too many inputs");
     double weightSum = 0.0;
     for (std::size_t k = 0; k < inputs.size(); ++k) {
         if (!std::isfinite(weights[k]) || weights[k] < 0.0)
-            throw Error(detail::concat("sweep: weight ", weights[k], " of input ", k, " is not finite and >= 0"));
+            throw Error(ErrorCode::argument,
+                        detail::concat("sweep: weight ", weights[k], " of input ", k, " is not finite and >= 0"));
         if (inputs[k].channels() != channels)
-            throw Error(detail::concat("sweep: input ", k, " has ", inputs[k].channels(), " channels, expected ",
-                                       channels));
+            throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k].channels(),
+                                                            " channels, expected ", channels));
         if (inputs[k].layerCount() != 1)
-            throw Error(detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
-                                       " layers; the sweep averages single-layer functions"));
+            throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
+                                                            " layers; the sweep averages single-layer functions"));
         weightSum += weights[k];
     }
     if (inputs.empty()) return std::nullopt;
     if (!(weightSum > 0.0) || !std::isfinite(weightSum))
-        throw Error(detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
 
     const std::size_t n = inputs.size();
     const std::size_t nc = static_cast<std::size_t>(channels);
@@ -166,7 +169,8 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
             if (value[c] != left[c]) step = true;
         }
         if (count > UINT32_MAX)
-            throw Error(detail::concat("sweep: ", count, " samples at depth ", z, " exceed the 2^32 - 1 a vertex holds"));
+            throw Error(ErrorCode::limit, detail::concat("sweep: ", count, " samples at depth ", z,
+                                                         " exceed the 2^32 - 1 a vertex holds"));
         const std::uint32_t count32 = static_cast<std::uint32_t>(count);
         if (!sink.push(z, left, step ? 0u : count32)) return z;
         if (step && !sink.push(z, value, count32)) return z;

@@ -15,11 +15,13 @@ void checkHits(std::span<const SurfaceHit> hits, int channels) {
     for (std::size_t i = 0; i < hits.size(); ++i) {
         const SurfaceHit& h = hits[i];
         if (!std::isfinite(h.z) || h.z < 0.0f)
-            throw Error(detail::concat("surface hit ", i, ": depth ", h.z, " is not a finite value >= 0"));
+            throw Error(ErrorCode::argument,
+                        detail::concat("surface hit ", i, ": depth ", h.z, " is not a finite value >= 0"));
         for (int c = 0; c < channels; ++c) {
             const float o = h.opacity[static_cast<std::size_t>(c)];
             if (!(o >= 0.0f && o <= 1.0f))
-                throw Error(detail::concat("surface hit ", i, " channel ", c, ": opacity ", o, " is outside [0, 1]"));
+                throw Error(ErrorCode::argument,
+                            detail::concat("surface hit ", i, " channel ", c, ": opacity ", o, " is outside [0, 1]"));
         }
     }
 }
@@ -28,10 +30,11 @@ void checkVolume(std::span<const VolumeSample> volume) {
     for (std::size_t i = 0; i < volume.size(); ++i) {
         const VolumeSample& s = volume[i];
         if (!std::isfinite(s.z) || s.z < 0.0f)
-            throw Error(detail::concat("volume sample ", i, ": depth ", s.z, " is not a finite value >= 0"));
+            throw Error(ErrorCode::argument,
+                        detail::concat("volume sample ", i, ": depth ", s.z, " is not a finite value >= 0"));
         if (!std::isfinite(s.extinction) || s.extinction < 0.0f)
-            throw Error(detail::concat("volume sample ", i, ": extinction ", s.extinction,
-                                       " is not a finite value >= 0"));
+            throw Error(ErrorCode::argument, detail::concat("volume sample ", i, ": extinction ", s.extinction,
+                                                            " is not a finite value >= 0"));
     }
 }
 
@@ -45,7 +48,7 @@ bool blocksNothing(const SurfaceHit& h, int channels) {
 
 VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts, float zStart) {
     if (channels != 1 && channels != kMaxChannels)
-        throw Error(detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
+        throw Error(ErrorCode::argument, detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
     checkHits(ray.hits, channels);
     checkVolume(ray.volume);
 

@@ -22,7 +22,8 @@ inline double lerpSegment(double za, double va, double zb, double vb, double z) 
 VisibilityFunction::VisibilityFunction(int channels, bool withCounts)
     : channels_(channels), withCounts_(withCounts) {
     if (channels != 1 && channels != kMaxChannels)
-        throw Error(detail::concat("visibility function: channel count ", channels, " is not 1 or 3"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("visibility function: channel count ", channels, " is not 1 or 3"));
 }
 
 std::uint64_t VisibilityFunction::totalCount() const {
@@ -45,8 +46,8 @@ void VisibilityFunction::addToLastCount(std::uint64_t count) {
     if (!withCounts_ || count_.empty()) return;
     const std::uint64_t sum = count_.back() + count;
     if (sum > UINT32_MAX)
-        throw Error(detail::concat("visibility function: sample count ", sum, " at vertex ", count_.size() - 1,
-                                   " exceeds 2^32 - 1"));
+        throw Error(ErrorCode::argument, detail::concat("visibility function: sample count ", sum, " at vertex ",
+                                                        count_.size() - 1, " exceeds 2^32 - 1"));
     count_.back() = static_cast<std::uint32_t>(sum);
 }
 
@@ -74,35 +75,39 @@ double VisibilityFunction::evaluateLayer(std::size_t layer, double z, int channe
 void VisibilityFunction::validate() const {
     const std::size_t n = z_.size();
     if (v_.size() != n * static_cast<std::size_t>(channels_))
-        throw Error(detail::concat("visibility function: ", v_.size(), " values for ", n, " vertices of ",
-                                   channels_, " channels"));
+        throw Error(ErrorCode::argument, detail::concat("visibility function: ", v_.size(), " values for ", n,
+                                                        " vertices of ", channels_, " channels"));
     if (withCounts_ && count_.size() != n)
-        throw Error(detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
     view().validate();
 }
 
 void VisibilityView::validate() const {
     const std::size_t n = z_.size();
     if (v_.size() != n * static_cast<std::size_t>(channels_))
-        throw Error(detail::concat("visibility function: ", v_.size(), " values for ", n, " vertices of ",
-                                   channels_, " channels"));
+        throw Error(ErrorCode::argument, detail::concat("visibility function: ", v_.size(), " values for ", n,
+                                                        " vertices of ", channels_, " channels"));
     if (!count_.empty() && count_.size() != n)
-        throw Error(detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("visibility function: ", count_.size(), " counts for ", n, " vertices"));
     std::size_t previousBegin = 0;
     for (std::size_t layer = 1; layer < layerCount(); ++layer) {
         const std::size_t b = layerBegin(layer);
         if (b <= previousBegin || b >= n)
-            throw Error(detail::concat("visibility function: layer ", layer, " starts at vertex ", b,
-                                       ", outside (", previousBegin, ", ", n, ")"));
+            throw Error(ErrorCode::argument, detail::concat("visibility function: layer ", layer, " starts at vertex ",
+                                                            b, ", outside (", previousBegin, ", ", n, ")"));
         previousBegin = b;
     }
     std::size_t nextLayer = 1;
     for (std::size_t i = 0; i < n; ++i) {
         const float z = z_[i];
-        if (!std::isfinite(z)) throw Error(detail::concat("vertex ", i, ": depth ", z, " is not finite"));
-        if (z < 0.0f) throw Error(detail::concat("vertex ", i, ": depth ", z, " is negative"));
+        if (!std::isfinite(z))
+            throw Error(ErrorCode::argument, detail::concat("vertex ", i, ": depth ", z, " is not finite"));
+        if (z < 0.0f) throw Error(ErrorCode::argument, detail::concat("vertex ", i, ": depth ", z, " is negative"));
         if (i > 0 && z < z_[i - 1])
-            throw Error(detail::concat("vertex ", i, ": depth ", z, " is less than the previous depth ", z_[i - 1]));
+            throw Error(ErrorCode::argument,
+                        detail::concat("vertex ", i, ": depth ", z, " is less than the previous depth ", z_[i - 1]));
         bool layerStart = (i == 0);
         if (nextLayer < layerCount() && i == layerBegin(nextLayer)) {
             layerStart = true;
@@ -111,10 +116,11 @@ void VisibilityView::validate() const {
         for (int c = 0; c < channels_; ++c) {
             const float v = value(i, c);
             if (!std::isfinite(v) || v < 0.0f || v > 1.0f)
-                throw Error(detail::concat("vertex ", i, " channel ", c, ": visibility ", v, " is outside [0, 1]"));
+                throw Error(ErrorCode::argument,
+                            detail::concat("vertex ", i, " channel ", c, ": visibility ", v, " is outside [0, 1]"));
             if (!layerStart && v > value(i - 1, c))
-                throw Error(detail::concat("vertex ", i, " channel ", c, ": visibility ", v,
-                                           " increases from the previous ", value(i - 1, c)));
+                throw Error(ErrorCode::argument, detail::concat("vertex ", i, " channel ", c, ": visibility ", v,
+                                                                " increases from the previous ", value(i - 1, c)));
         }
     }
 }

@@ -290,18 +290,21 @@ std::size_t firstBlocked(const DenseFunction& f, double tolerance) {
 
 VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, const VisibilityProductOptions& options) {
     if (!std::isfinite(options.tolerance) || options.tolerance < 0.0)
-        throw Error(concat("visibility product: tolerance ", options.tolerance, " is not a finite value >= 0"));
+        throw Error(ErrorCode::argument,
+                    concat("visibility product: tolerance ", options.tolerance, " is not a finite value >= 0"));
     if (std::isnan(options.maxInterpolationError) || std::isinf(options.maxInterpolationError))
-        throw Error(concat("visibility product: interpolation error ", options.maxInterpolationError, " is not finite"));
+        throw Error(ErrorCode::argument, concat("visibility product: interpolation error ",
+                                                options.maxInterpolationError, " is not finite"));
     if (options.maxLayers < 1 || options.maxLayers > 255)
-        throw Error(concat("visibility product: layer count ", options.maxLayers, " is not in [1, 255]"));
+        throw Error(ErrorCode::argument,
+                    concat("visibility product: layer count ", options.maxLayers, " is not in [1, 255]"));
     if (!options.factorLayers.empty() && options.factorLayers.size() != factors.size())
-        throw Error(concat("visibility product: ", options.factorLayers.size(), " factor layer counts for ",
-                           factors.size(), " factors"));
+        throw Error(ErrorCode::argument, concat("visibility product: ", options.factorLayers.size(),
+                                                " factor layer counts for ", factors.size(), " factors"));
     for (std::size_t i = 0; i < options.factorLayers.size(); ++i)
         if (options.factorLayers[i] < 1 || options.factorLayers[i] > 255)
-            throw Error(concat("visibility product: factor ", i, " layer count ", options.factorLayers[i],
-                               " is not in [1, 255]"));
+            throw Error(ErrorCode::argument, concat("visibility product: factor ", i, " layer count ",
+                                                    options.factorLayers[i], " is not in [1, 255]"));
     const double maxError = options.maxInterpolationError > 0.0
                                 ? options.maxInterpolationError
                                 : std::max(options.tolerance / 16.0, kMinInterpolationError);
@@ -309,7 +312,8 @@ VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, co
     for (std::size_t i = 0; i < factors.size(); ++i) {
         const VisibilityView& f = factors[i];
         if (f.channels() != 1 && f.channels() != 3)
-            throw Error(concat("visibility product: factor ", i, " has ", f.channels(), " channels, not 1 or 3"));
+            throw Error(ErrorCode::argument,
+                        concat("visibility product: factor ", i, " has ", f.channels(), " channels, not 1 or 3"));
         if (!f.empty()) channels = std::max(channels, f.channels());
     }
 

@@ -221,7 +221,8 @@ private:
 std::vector<DeepSample> samplesOf(const VisibilityView& f, double maxDeviation, double* largest,
                                   std::uint64_t* oneStepExcess = nullptr) {
     if (!(maxDeviation > 0.0) || !std::isfinite(maxDeviation))
-        throw Error(concat("deep EXR export: the largest deviation must be a positive number, got ", maxDeviation));
+        throw Error(ErrorCode::argument,
+                    concat("deep EXR export: the largest deviation must be a positive number, got ", maxDeviation));
     std::vector<DeepSample> out;
     SampleBuilder builder(f.channels(), maxDeviation, out);
     const std::size_t end = f.lightEnd();
@@ -263,9 +264,11 @@ std::vector<DeepSample> deepSamplesFromVisibility(const VisibilityView& function
 
 VisibilityFunction visibilityFromDeepSamples(std::span<const DeepSample> samples, int channels,
                                              double maxLinearError) {
-    if (channels != 1 && channels != 3) throw Error(concat("deep samples: channels must be 1 or 3, got ", channels));
+    if (channels != 1 && channels != 3)
+        throw Error(ErrorCode::argument, concat("deep samples: channels must be 1 or 3, got ", channels));
     if (!(maxLinearError > 0.0) || !std::isfinite(maxLinearError))
-        throw Error(concat("deep samples: the linearisation error must be a positive number, got ", maxLinearError));
+        throw Error(ErrorCode::argument,
+                    concat("deep samples: the linearisation error must be a positive number, got ", maxLinearError));
     auto alphaOf = [&](const DeepSample& s, int c) { return channels == 1 ? s.alpha : s.alphaRGB[std::size_t(c)]; };
 
     // Events: every front and back; point samples and opaque volume fronts
@@ -276,11 +279,12 @@ VisibilityFunction visibilityFromDeepSamples(std::span<const DeepSample> samples
     for (std::size_t i = 0; i < samples.size(); ++i) {
         const DeepSample& s = samples[i];
         if (!std::isfinite(s.z) || s.z < 0.0f || !std::isfinite(s.zBack))
-            throw Error(concat("sample ", i, ": depth Z ", s.z, " ZBack ", s.zBack, " (must be finite, Z >= 0)"));
+            throw Error(ErrorCode::argument,
+                        concat("sample ", i, ": depth Z ", s.z, " ZBack ", s.zBack, " (must be finite, Z >= 0)"));
         for (int c = 0; c < channels; ++c) {
             const float a = alphaOf(s, c);
             if (!(a >= 0.0f && a <= 1.0f))
-                throw Error(concat("sample ", i, ": alpha ", a, " is outside [0, 1]"));
+                throw Error(ErrorCode::argument, concat("sample ", i, ": alpha ", a, " is outside [0, 1]"));
         }
         std::array<double, kMaxChannels> logT{0.0, 0.0, 0.0};
         bool any = false;
@@ -455,7 +459,7 @@ StandardCameraMatrices standardCameraMatrices(const LightCamera& camera) {
 LightCamera cameraFromStandardMatrices(const Matrix4& worldToCamera, const Matrix4& worldToNDC) {
     const Matrix4 w = transpose(worldToCamera);
     Matrix4 wInverse;
-    if (!invert(w, wInverse)) throw Error("worldToCamera is singular");
+    if (!invert(w, wInverse)) throw Error(ErrorCode::corrupt, "worldToCamera is singular");
     const Matrix4 p = multiply(transpose(worldToNDC), wInverse);
     double scale = 0.0;
     for (const auto& row : p)
@@ -463,7 +467,8 @@ LightCamera cameraFromStandardMatrices(const Matrix4& worldToCamera, const Matri
     const double eps = 1e-5 * scale;
     auto zero = [&](double v) { return std::abs(v) <= eps; };
     auto notProjection = [] {
-        return Error("worldToNDC is not a perspective or orthographic projection along the camera's z axis");
+        return Error(ErrorCode::corrupt,
+                     "worldToNDC is not a perspective or orthographic projection along the camera's z axis");
     };
     if (!(scale > 0.0) || !std::isfinite(scale)) throw notProjection();
 
@@ -592,8 +597,8 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     const auto map = DeepShadowMap::open(dsmPath);
     const MapInfo& info = map->info();
     if (options.level >= info.levels.size())
-        throw Error(concat(quoted(dsmPath), ": level ", options.level, " does not exist (the map has ",
-                           info.levels.size(), " levels)"));
+        throw Error(ErrorCode::argument, concat(quoted(dsmPath), ": level ", options.level,
+                                                " does not exist (the map has ", info.levels.size(), " levels)"));
     const LevelInfo& level = info.levels[options.level];
     ExrExportReport report;
     report.width = level.width;
@@ -602,9 +607,11 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     report.maxDeviation =
         options.maxDeviation > 0.0 ? options.maxDeviation : std::clamp(level.tolerance / 2.0, 1e-5, 1e-3);
     if (!std::isfinite(report.maxDeviation))
-        throw Error(concat("deep EXR export: the largest deviation must be finite, got ", report.maxDeviation));
+        throw Error(ErrorCode::argument,
+                    concat("deep EXR export: the largest deviation must be finite, got ", report.maxDeviation));
     if (options.tiled && (options.tileSize < 1 || options.tileSize > 65536))
-        throw Error(concat("deep EXR export: tile size ", options.tileSize, " is outside 1..65536"));
+        throw Error(ErrorCode::argument,
+                    concat("deep EXR export: tile size ", options.tileSize, " is outside 1..65536"));
     const bool mono = info.channels == 1;
     const int width = int(level.width), height = int(level.height);
 
@@ -657,7 +664,8 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
                     const PixelFunction f = map->pixel(options.level, std::uint32_t(x), std::uint32_t(y));
                     band.samples[i] = samplesOf(f.view(), report.maxDeviation, &worst, &excess);
                 } catch (const Error& e) {
-                    throw Error(concat(quoted(dsmPath), " level ", options.level, " pixel ", x, ",", y, ": ", e.what()));
+                    throw Error(e.code(), concat(quoted(dsmPath), " level ", options.level, " pixel ", x, ",", y, ": ",
+                                                 e.what()));
                 }
                 band.counts[i] = unsigned(band.samples[i].size());
                 largest[std::size_t(y)] = std::max(largest[std::size_t(y)], worst);
@@ -865,8 +873,8 @@ public:
         limitOpenExrAllocations();
         bool tiled = false, deep = false, multiPart = false;
         if (!Imf::isOpenExrFile(path.c_str(), tiled, deep, multiPart))
-            throw Error(concat(quoted(path), ": not an OpenEXR file"));
-        if (!deep) throw Error(concat(quoted(path), ": not a deep image (a flat OpenEXR file)"));
+            throw Error(ErrorCode::format, concat(quoted(path), ": not an OpenEXR file"));
+        if (!deep) throw Error(ErrorCode::format, concat(quoted(path), ": not a deep image (a flat OpenEXR file)"));
         // The tiled flag of isOpenExrFile() describes flat files only; a deep
         // part says what it is in its type attribute.
         (void)tiled;
@@ -875,21 +883,26 @@ public:
         const std::string type = file_->header(0).type();
         if (type == Imf::DEEPTILE) tiledFile_ = std::make_unique<Imf::DeepTiledInputPart>(*file_, 0);
         else if (type == Imf::DEEPSCANLINE) scanFile_ = std::make_unique<Imf::DeepScanLineInputPart>(*file_, 0);
-        else throw Error(concat(quoted(path), ": part 0 is not a deep image (type '", type, "')"));
+        else
+            throw Error(ErrorCode::format, concat(quoted(path), ": part 0 is not a deep image (type '", type, "')"));
         const Imf::ChannelList& ch = header().channels();
-        if (!ch.findChannel("Z")) throw Error(concat(quoted(path), ": no Z channel (a deep image needs depths)"));
+        if (!ch.findChannel("Z"))
+            throw Error(ErrorCode::format, concat(quoted(path), ": no Z channel (a deep image needs depths)"));
         hasZBack_ = ch.findChannel("ZBack") != nullptr;
         rgb_ = ch.findChannel("AR") && ch.findChannel("AG") && ch.findChannel("AB");
         if (!rgb_ && !ch.findChannel("A"))
-            throw Error(concat(quoted(path), ": no A channel (nor AR, AG and AB): nothing gives the opacity"));
+            throw Error(ErrorCode::format,
+                        concat(quoted(path), ": no A channel (nor AR, AG and AB): nothing gives the opacity"));
         data_ = header().dataWindow();
         display_ = header().displayWindow();
         const long long dw = (long long)display_.max.x - display_.min.x + 1;
         const long long dh = (long long)display_.max.y - display_.min.y + 1;
         if (dw < 1 || dh < 1 || dw > kMaxExrExtent || dh > kMaxExrExtent)
-            throw Error(concat(quoted(path), ": display window ", dw, " x ", dh, " is outside 1..", kMaxExrExtent));
+            throw Error(ErrorCode::limit,
+                        concat(quoted(path), ": display window ", dw, " x ", dh, " is outside 1..", kMaxExrExtent));
         const long long ww = (long long)data_.max.x - data_.min.x + 1;
-        if (ww > kMaxExrExtent) throw Error(concat(quoted(path), ": data window is wider than ", kMaxExrExtent));
+        if (ww > kMaxExrExtent)
+            throw Error(ErrorCode::limit, concat(quoted(path), ": data window is wider than ", kMaxExrExtent));
     }
 
     const Imf::Header& header() const { return tiledFile_ ? tiledFile_->header() : scanFile_->header(); }
@@ -935,13 +948,15 @@ private:
         std::uint64_t total = 0;
         for (std::size_t i = 0; i < band.counts.size(); ++i) {
             if (band.counts[i] > kMaxSamplesPerPixel)
-                throw Error(concat(quoted(path_), " pixel ", band.x0 + int(i % std::size_t(band.width)), ",",
+                throw Error(ErrorCode::corrupt,
+                            concat(quoted(path_), " pixel ", band.x0 + int(i % std::size_t(band.width)), ",",
                                    band.y0 + int(i / std::size_t(band.width)), ": ", band.counts[i],
                                    " samples (more than ", kMaxSamplesPerPixel, ")"));
             total += band.counts[i];
         }
         if (total > kMaxSamplesPerBand)
-            throw Error(concat(quoted(path_), ": rows ", band.y0, "..", band.y0 + band.rows - 1, " hold ", total,
+            throw Error(ErrorCode::corrupt,
+                        concat(quoted(path_), ": rows ", band.y0, "..", band.y0 + band.rows - 1, " hold ", total,
                                " samples (more than ", kMaxSamplesPerBand, " at once)"));
         for (std::size_t i = 0; i < band.counts.size(); ++i) band.samples[i].resize(band.counts[i]);
         band.point();
@@ -971,7 +986,9 @@ std::optional<LightCamera> cameraFromDsmAttributes(const Imf::Header& h) {
     LightCamera cam;
     if (p->value() == "perspective") cam.projection = Projection::Perspective;
     else if (p->value() == "orthographic") cam.projection = Projection::Orthographic;
-    else throw Error(concat("dsm:projection '", p->value(), "' is neither perspective nor orthographic"));
+    else
+        throw Error(ErrorCode::corrupt,
+                    concat("dsm:projection '", p->value(), "' is neither perspective nor orthographic"));
     for (int i = 0; i < 4; ++i)
         for (int j = 0; j < 4; ++j) cam.worldToLight[std::size_t(4 * j + i)] = m->value()[i][j];
     cam.screenWindow = {lo->value().x, hi->value().x, lo->value().y, hi->value().y};
@@ -996,11 +1013,13 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
     double half = 0.0;
     if (options.fieldOfView > 0.0) {
         if (!(options.fieldOfView < 180.0))
-            throw Error(concat("field of view ", options.fieldOfView, " is not below 180 degrees"));
+            throw Error(ErrorCode::argument,
+                        concat("field of view ", options.fieldOfView, " is not below 180 degrees"));
         cam.projection = Projection::Perspective;
         half = std::tan(options.fieldOfView * std::numbers::pi / 360.0);
     } else {
-        if (!std::isfinite(options.orthoWidth)) throw Error("the orthographic width must be finite");
+        if (!std::isfinite(options.orthoWidth))
+            throw Error(ErrorCode::argument, "the orthographic width must be finite");
         cam.projection = Projection::Orthographic;
         half = options.orthoWidth / 2.0;
     }
@@ -1045,11 +1064,12 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
                 if ((cam = cameraFromDsmAttributes(h))) report.cameraSource = "dsm attributes";
                 else if ((cam = cameraFromStandardAttributes(h))) report.cameraSource = "standard attributes";
             } catch (const Error& e) {
-                throw Error(concat(quoted(exrPath), ": light camera: ", e.what()));
+                throw Error(ErrorCode::corrupt, concat(quoted(exrPath), ": light camera: ", e.what()));
             }
             if (!cam)
-                throw Error(concat(quoted(exrPath), ": no light camera: neither dsm:* nor worldToCamera and "
-                                                    "worldToNDC attributes (give one explicitly)"));
+                throw Error(ErrorCode::argument, concat(quoted(exrPath),
+                                                        ": no light camera: neither dsm:* nor worldToCamera and "
+                                                        "worldToNDC attributes (give one explicitly)"));
             w.camera = *cam;
         }
         const auto* fileTolerance = findAttribute<Imf::DoubleAttribute>(h, "dsm:tolerance");
@@ -1058,7 +1078,7 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
                                ? fileTolerance->value()
                                : kDefaultExrImportTolerance;
         if (!std::isfinite(report.tolerance))
-            throw Error(concat("the tolerance must be finite, got ", report.tolerance));
+            throw Error(ErrorCode::argument, concat("the tolerance must be finite, got ", report.tolerance));
         report.maxLinearError =
             options.maxLinearError > 0.0 ? options.maxLinearError : std::clamp(report.tolerance / 4.0, 1e-5, 1e-3);
 
@@ -1107,7 +1127,8 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
                         out = compress(exact, report.tolerance);
                         vertices[std::size_t(r)] += out.size();
                     } catch (const Error& e) {
-                        throw Error(concat(quoted(exrPath), " pixel ", fileX, ",", fileY, ": ", e.what()));
+                        throw Error(ErrorCode::corrupt,
+                                    concat(quoted(exrPath), " pixel ", fileX, ",", fileY, ": ", e.what()));
                     }
                 }
             });
@@ -1126,7 +1147,7 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
     } catch (const Error&) {
         throw;
     } catch (const std::exception& e) {
-        throw Error(concat(quoted(exrPath), ": ", e.what()));
+        throw Error(ErrorCode::io, concat(quoted(exrPath), ": ", e.what()));
     }
 }
 

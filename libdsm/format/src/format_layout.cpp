@@ -65,9 +65,11 @@ std::vector<std::uint8_t> encodeHeader(const Header& h) {
 
 Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64_t fileSize,
                     const ReaderOptions& limits, const std::string& where) {
-    auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    auto fail = [&](const std::string& what, ErrorCode code = ErrorCode::corrupt) {
+        throw Error(code, concat(where, ": ", what));
+    };
     if (available < kMagic.size() || std::memcmp(data, kMagic.data(), kMagic.size()) != 0)
-        fail("not a deep shadow map (bad magic bytes)");
+        fail("not a deep shadow map (bad magic bytes)", ErrorCode::format);
     if (available < 16) fail(concat("file of ", fileSize, " bytes is too short for a header"));
     ByteReader r(data, available);
     r.skip(kMagic.size());
@@ -76,7 +78,8 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     h.versionMinor = r.u16();
     if (h.versionMajor != kVersionMajor)
         fail(concat("format version ", h.versionMajor, ".", h.versionMinor, " is not supported (this reader reads ",
-                    kVersionMajor, ".x)"));
+                    kVersionMajor, ".x)"),
+             ErrorCode::unsupported);
     h.headerSize = r.u32();
     if (h.headerSize < kHeaderSize) fail(concat("header size ", h.headerSize, " is below the minimum ", kHeaderSize));
     if (h.headerSize > fileSize || h.headerSize > available)
@@ -94,7 +97,8 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     h.requiredFlags = r.u32();
     h.optionalFlags = r.u32();
     if (h.requiredFlags & ~kKnownRequiredFlags)
-        fail(concat("unknown required flags 0x", std::hex, h.requiredFlags & ~kKnownRequiredFlags));
+        fail(concat("unknown required flags 0x", std::hex, h.requiredFlags & ~kKnownRequiredFlags),
+             ErrorCode::unsupported);
     h.width = r.u32();
     h.height = r.u32();
     h.tileSize = r.u32();
@@ -123,7 +127,8 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     if (h.width == 0 || h.height == 0) fail(concat("image size ", h.width, "x", h.height, " is empty"));
     if (h.width > limits.maxWidth || h.height > limits.maxHeight)
         fail(concat("image size ", h.width, "x", h.height, " exceeds the reader's limit ", limits.maxWidth, "x",
-                    limits.maxHeight));
+                    limits.maxHeight),
+             ErrorCode::limit);
     if (h.tileSize < kMinTileSize || h.tileSize > kMaxTileSize || !std::has_single_bit(h.tileSize))
         fail(concat("tile size ", h.tileSize, " is not a power of two from ", kMinTileSize, " to ", kMaxTileSize));
     if (h.channels != 1 && h.channels != 3) fail(concat("channel count ", int(h.channels), " is not 1 or 3"));
@@ -144,7 +149,8 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
         levelTableBytes > fileSize - h.levelTableOffset)
         fail(concat("level table at ", h.levelTableOffset, " (", levelTableBytes, " bytes) does not fit in the file"));
     if (h.metadataSize > limits.maxMetadataBytes)
-        fail(concat("metadata of ", h.metadataSize, " bytes exceeds the reader's limit ", limits.maxMetadataBytes));
+        fail(concat("metadata of ", h.metadataSize, " bytes exceeds the reader's limit ", limits.maxMetadataBytes),
+             ErrorCode::limit);
     if (h.metadataOffset < h.headerSize || h.metadataOffset > fileSize || h.metadataSize > fileSize - h.metadataOffset)
         fail(concat("metadata at ", h.metadataOffset, " (", h.metadataSize, " bytes) does not fit in the file"));
     return h;

@@ -1,14 +1,8 @@
 #include "dsm/reader.h"
 
 #include <bit>
-#include <cerrno>
 #include <cmath>
-#include <cstring>
 #include <limits>
-
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
 
 #include "dsm/error.h"
 #include "format_layout.h"
@@ -21,18 +15,13 @@ namespace dsm {
 
 using detail::concat;
 
-void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o) {
-    path = p;
+void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const std::string& name,
+                                    const ReaderOptions& o) {
+    path = name;
     options = o;
-    // O_NONBLOCK: opening a FIFO would otherwise wait for a writer forever.
-    // It is refused below, and means nothing for the regular file we keep.
-    fd = ::open(p.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-    if (fd < 0) throw Error(ErrorCode::io, concat(where(), ": cannot open: ", std::strerror(errno)));
-    struct stat st {};
-    if (::fstat(fd, &st) != 0) throw Error(ErrorCode::io, concat(where(), ": cannot stat: ", std::strerror(errno)));
-    if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, concat(where(), ": not a regular file"));
-    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
-    const std::uint64_t fileSize = static_cast<std::uint64_t>(st.st_size);
+    if (!in) throw Error(ErrorCode::argument, concat(where(), ": no input given"));
+    input = std::move(in);
+    const std::uint64_t fileSize = input->size();
 
     // Header: the fixed part first, then all of it if a newer minor version
     // wrote a longer one (the fields we do not know are skipped).
@@ -52,33 +41,37 @@ void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o)
     try {
         info.camera.validate();
     } catch (const Error& e) {
-        throw Error(concat(where(), ": ", e.what()));
+        throw Error(ErrorCode::corrupt, concat(where(), ": ", e.what()));
     }
 
     // Level table.
     std::vector<std::uint8_t> table(std::size_t(h.levelCount) * h.levelEntrySize);
     readAt(h.levelTableOffset, table.data(), table.size(), where());
     if (format::crc32(table.data(), table.size()) != h.levelTableCrc)
-        throw Error(concat(where(), ": level table CRC-32 mismatch"));
+        throw Error(ErrorCode::corrupt, concat(where(), ": level table CRC-32 mismatch"));
     for (unsigned l = 0; l < h.levelCount; ++l) {
         const format::LevelEntry e = format::decodeLevelEntry(table.data() + std::size_t(l) * h.levelEntrySize);
         const std::string lw = concat(where(), " level ", l);
         const LevelInfo& L = e.info;
         if (L.width != levelExtent(info.width, l) || L.height != levelExtent(info.height, l))
-            throw Error(concat(lw, ": size ", L.width, "x", L.height, " does not halve the level above"));
+            throw Error(ErrorCode::corrupt,
+                        concat(lw, ": size ", L.width, "x", L.height, " does not halve the level above"));
         if (L.tilesX != (L.width + info.tileSize - 1) / info.tileSize ||
             L.tilesY != (L.height + info.tileSize - 1) / info.tileSize)
-            throw Error(concat(lw, ": tile counts ", L.tilesX, "x", L.tilesY, " do not match its size"));
+            throw Error(ErrorCode::corrupt,
+                        concat(lw, ": tile counts ", L.tilesX, "x", L.tilesY, " do not match its size"));
         if (!std::isfinite(L.tolerance) || L.tolerance < 0.0 || !std::isfinite(L.errorBound) || L.errorBound < 0.0)
-            throw Error(concat(lw, ": tolerance ", L.tolerance, " or error bound ", L.errorBound, " is invalid"));
+            throw Error(ErrorCode::corrupt,
+                        concat(lw, ": tolerance ", L.tolerance, " or error bound ", L.errorBound, " is invalid"));
         const std::uint64_t tiles = std::uint64_t(L.tilesX) * L.tilesY;
         const std::uint64_t bytes = tiles * h.tileEntrySize;
         if (e.directoryOffset < h.headerSize || e.directoryOffset > fileSize || bytes > fileSize - e.directoryOffset)
-            throw Error(concat(lw, ": tile directory at ", e.directoryOffset, " (", bytes, " bytes) does not fit"));
+            throw Error(ErrorCode::corrupt,
+                        concat(lw, ": tile directory at ", e.directoryOffset, " (", bytes, " bytes) does not fit"));
         std::vector<std::uint8_t> dir(bytes);
         readAt(e.directoryOffset, dir.data(), dir.size(), lw);
         if (format::crc32(dir.data(), dir.size()) != e.directoryCrc)
-            throw Error(concat(lw, ": tile directory CRC-32 mismatch"));
+            throw Error(ErrorCode::corrupt, concat(lw, ": tile directory CRC-32 mismatch"));
         std::vector<TileSummary> tilesOfLevel(tiles);
         std::uint64_t vertices = 0, nonEmpty = 0, stored = 0;
         for (std::uint64_t i = 0; i < tiles; ++i) {
@@ -89,20 +82,25 @@ void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o)
             if (t.empty()) {
                 if (t.rawBytes != 0 || t.vertexCount != 0 || t.nonEmptyPixels != 0 || t.offset != 0 || t.crc32 != 0 ||
                     std::bit_cast<std::uint32_t>(t.minZ) != 0 || std::bit_cast<std::uint32_t>(t.maxZ) != 0)
-                    throw Error(concat(tw, ": empty tile with non-zero directory fields"));
+                    throw Error(ErrorCode::corrupt, concat(tw, ": empty tile with non-zero directory fields"));
             } else {
                 if (t.offset < h.headerSize || t.offset > fileSize || t.storedBytes > fileSize - t.offset)
-                    throw Error(concat(tw, ": data at ", t.offset, " (", t.storedBytes, " bytes) does not fit in the file"));
-                if (t.rawBytes < t.storedBytes) throw Error(concat(tw, ": raw size below stored size"));
+                    throw Error(ErrorCode::corrupt, concat(tw, ": data at ", t.offset, " (", t.storedBytes,
+                                                           " bytes) does not fit in the file"));
+                if (t.rawBytes < t.storedBytes)
+                    throw Error(ErrorCode::corrupt, concat(tw, ": raw size below stored size"));
                 if (t.rawBytes > options.maxTileBytes)
-                    throw Error(concat(tw, ": tile of ", t.rawBytes, " bytes exceeds the reader's limit ",
-                                       options.maxTileBytes));
+                    throw Error(ErrorCode::limit, concat(tw, ": tile of ", t.rawBytes,
+                                                         " bytes exceeds the reader's limit ", options.maxTileBytes));
                 if (t.vertexCount == 0 || t.vertexCount > pixels * options.maxVerticesPerPixel)
-                    throw Error(concat(tw, ": vertex count ", t.vertexCount, " is invalid for ", pixels, " pixels"));
+                    throw Error(ErrorCode::corrupt,
+                                concat(tw, ": vertex count ", t.vertexCount, " is invalid for ", pixels, " pixels"));
                 if (t.nonEmptyPixels == 0 || t.nonEmptyPixels > pixels)
-                    throw Error(concat(tw, ": non-empty pixel count ", t.nonEmptyPixels, " is invalid"));
+                    throw Error(ErrorCode::corrupt,
+                                concat(tw, ": non-empty pixel count ", t.nonEmptyPixels, " is invalid"));
                 if (!std::isfinite(t.minZ) || !std::isfinite(t.maxZ) || t.minZ < 0.0f || t.minZ > t.maxZ)
-                    throw Error(concat(tw, ": depth range [", t.minZ, ", ", t.maxZ, "] is invalid"));
+                    throw Error(ErrorCode::corrupt,
+                                concat(tw, ": depth range [", t.minZ, ", ", t.maxZ, "] is invalid"));
             }
             vertices += t.vertexCount;
             nonEmpty += t.nonEmptyPixels;
@@ -110,7 +108,7 @@ void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o)
             tilesOfLevel[i] = t;
         }
         if (vertices != L.vertexCount || nonEmpty != L.nonEmptyPixels || stored != L.storedBytes)
-            throw Error(concat(lw, ": level totals do not match its tile directory"));
+            throw Error(ErrorCode::corrupt, concat(lw, ": level totals do not match its tile directory"));
         info.levels.push_back(L);
         directories.push_back(std::move(tilesOfLevel));
     }
@@ -118,7 +116,7 @@ void DeepShadowMap::Impl::openFile(const std::string& p, const ReaderOptions& o)
     std::string metadata(h.metadataSize, '\0');
     readAt(h.metadataOffset, reinterpret_cast<std::uint8_t*>(metadata.data()), metadata.size(), where());
     if (format::crc32(reinterpret_cast<const std::uint8_t*>(metadata.data()), metadata.size()) != h.metadataCrc)
-        throw Error(concat(where(), ": metadata CRC-32 mismatch"));
+        throw Error(ErrorCode::corrupt, concat(where(), ": metadata CRC-32 mismatch"));
     info.metadata = std::move(metadata);
 
     cache = options.cache ? options.cache : TileCache::defaultCache();
@@ -136,7 +134,14 @@ DeepShadowMap::~DeepShadowMap() = default;
 
 std::shared_ptr<DeepShadowMap> DeepShadowMap::open(const std::string& path, const ReaderOptions& options) {
     std::shared_ptr<DeepShadowMap> map(new DeepShadowMap());
-    map->impl_->openFile(path, options);
+    map->impl_->openInput(MapInput::file(path), path, options);
+    return map;
+}
+
+std::shared_ptr<DeepShadowMap> DeepShadowMap::open(std::shared_ptr<const MapInput> input, const std::string& name,
+                                                   const ReaderOptions& options) {
+    std::shared_ptr<DeepShadowMap> map(new DeepShadowMap());
+    map->impl_->openInput(std::move(input), name, options);
     return map;
 }
 
@@ -147,10 +152,12 @@ const TileCache& DeepShadowMap::cache() const { return *impl_->cache; }
 PixelFunction DeepShadowMap::pixel(unsigned level, std::uint32_t x, std::uint32_t y) const {
     const Impl& s = *impl_;
     if (level >= s.info.levels.size())
-        throw Error(concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
+        throw Error(ErrorCode::argument,
+                    concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
     const LevelInfo& L = s.info.levels[level];
     if (x >= L.width || y >= L.height)
-        throw Error(concat(s.where(), " level ", level, ": pixel ", x, ",", y, " is outside ", L.width, "x", L.height));
+        throw Error(ErrorCode::argument,
+                    concat(s.where(), " level ", level, ": pixel ", x, ",", y, " is outside ", L.width, "x", L.height));
     const std::uint32_t tx = x / s.info.tileSize, ty = y / s.info.tileSize;
     auto tile = s.getTile(level, tx, ty);
     const std::uint32_t w = s.tileExtent(L.width, tx);
@@ -161,17 +168,21 @@ PixelFunction DeepShadowMap::pixel(unsigned level, std::uint32_t x, std::uint32_
 TileSummary DeepShadowMap::tile(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
     const Impl& s = *impl_;
     if (level >= s.info.levels.size())
-        throw Error(concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
+        throw Error(ErrorCode::argument,
+                    concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
     const LevelInfo& L = s.info.levels[level];
     if (tx >= L.tilesX || ty >= L.tilesY)
-        throw Error(concat(s.where(), " level ", level, ": tile ", tx, ",", ty, " is outside ", L.tilesX, "x", L.tilesY));
+        throw Error(ErrorCode::argument, concat(s.where(), " level ", level, ": tile ", tx, ",", ty, " is outside ",
+                                                L.tilesX, "x", L.tilesY));
     return s.directories[level][std::size_t(ty) * L.tilesX + tx];
 }
 
-void validate(const std::string& path, const ReaderOptions& options) {
+void validate(const std::string& path, const ReaderOptions& options) { validate(MapInput::file(path), path, options); }
+
+void validate(std::shared_ptr<const MapInput> input, const std::string& name, const ReaderOptions& options) {
     ReaderOptions uncached = options;
     uncached.cache = TileCache::create(0);
-    const auto map = DeepShadowMap::open(path, uncached);
+    const auto map = DeepShadowMap::open(std::move(input), name, uncached);
     const auto& s = map->impl();
     for (unsigned l = 0; l < s.info.levels.size(); ++l)
         for (std::uint32_t ty = 0; ty < s.info.levels[l].tilesY; ++ty)

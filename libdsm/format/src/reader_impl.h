@@ -1,15 +1,14 @@
 // The inside of DeepShadowMap, shared by the reader and the lookups (internal).
 #pragma once
 
-#include <cerrno>
-#include <cstring>
+#include <algorithm>
+#include <exception>
 #include <memory>
 #include <string>
 #include <vector>
 
-#include <unistd.h>
-
 #include "dsm/error.h"
+#include "dsm/map_input.h"
 #include "dsm/reader.h"
 #include "text.h"
 #include "tile_cache_impl.h"
@@ -21,7 +20,7 @@ using detail::concat;
 
 struct DeepShadowMap::Impl {
     std::string path;
-    int fd = -1;
+    std::shared_ptr<const MapInput> input;
     ReaderOptions options;
     MapInfo info;
     std::vector<std::vector<TileSummary>> directories;
@@ -30,7 +29,6 @@ struct DeepShadowMap::Impl {
 
     ~Impl() {
         if (cache && fileId) cache->impl().forgetFile(fileId);
-        if (fd >= 0) ::close(fd);
     }
 
     std::string where() const { return concat("'", path, "'"); }
@@ -41,11 +39,14 @@ struct DeepShadowMap::Impl {
     void readAt(std::uint64_t offset, std::uint8_t* out, std::size_t size, const std::string& what) const {
         std::size_t done = 0;
         while (done < size) {
-            const ssize_t n = ::pread(fd, out + done, size - done, static_cast<off_t>(offset + done));
-            if (n < 0 && errno == EINTR) continue;
-            if (n < 0) throw Error(concat(what, ": read failed: ", std::strerror(errno)));
-            if (n == 0) throw Error(concat(what, ": unexpected end of file"));
-            done += static_cast<std::size_t>(n);
+            std::size_t n = 0;
+            try {
+                n = input->read(offset + done, out + done, size - done);
+            } catch (const std::exception& e) {
+                throw Error(ErrorCode::io, concat(what, ": read failed: ", e.what()));
+            }
+            if (n == 0) throw Error(ErrorCode::corrupt, concat(what, ": unexpected end of file"));
+            done += std::min(n, size - done);
         }
     }
 
@@ -72,7 +73,8 @@ struct DeepShadowMap::Impl {
         return loaded;
     }
 
-    void openFile(const std::string& p, const ReaderOptions& o);
+    /// Reads and checks everything but the tiles; `name` is what messages call the map.
+    void openInput(std::shared_ptr<const MapInput> in, const std::string& name, const ReaderOptions& o);
     /// Tile (tx, ty) of a level through the cache.
     std::shared_ptr<const format::DecodedTile> getTile(unsigned level, std::uint32_t tx, std::uint32_t ty) const;
 };

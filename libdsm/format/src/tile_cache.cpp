@@ -113,8 +113,8 @@ std::shared_ptr<const void> TileCache::Impl::get(const TileKey& key, const std::
 
     LoadedTile loaded = load();  // no lock held; may throw
     if (!loaded.data)
-        throw Error(detail::concat("tile cache: the loader of file ", key.file, " level ", key.level, " tile ",
-                                   key.tile, " returned no data"));
+        throw Error(ErrorCode::internal, detail::concat("tile cache: the loader of file ", key.file, " level ",
+                                                        key.level, " tile ", key.tile, " returned no data"));
 
     std::vector<std::shared_ptr<const void>> dropped;  // released after unlocking
     std::lock_guard lock(s.mutex);

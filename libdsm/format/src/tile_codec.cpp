@@ -54,7 +54,8 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
         }
     }
     if (vertices == 0) return out;  // empty tile: nothing stored
-    if (vertices > UINT32_MAX) throw Error(concat("tile holds ", vertices, " vertices, more than 2^32 - 1"));
+    if (vertices > UINT32_MAX)
+        throw Error(ErrorCode::limit, concat("tile holds ", vertices, " vertices, more than 2^32 - 1"));
     s.vertexCount = static_cast<std::uint32_t>(vertices);
     s.minZ = minZ;
     s.maxZ = maxZ;
@@ -73,14 +74,14 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
         if (layout.hasCounts)
             for (std::size_t i = 0; i < f.size(); ++i) w.u32(f.count(i));
     }
-    if (raw.size() > UINT32_MAX) throw Error(concat("tile of ", raw.size(), " bytes exceeds 4 GiB"));
+    if (raw.size() > UINT32_MAX) throw Error(ErrorCode::limit, concat("tile of ", raw.size(), " bytes exceeds 4 GiB"));
     s.rawBytes = static_cast<std::uint32_t>(raw.size());
 
     if (zlibLevel > 0) {
         uLongf bound = compressBound(static_cast<uLong>(raw.size()));
         std::vector<std::uint8_t> packed(bound);
         if (compress2(packed.data(), &bound, raw.data(), static_cast<uLong>(raw.size()), zlibLevel) != Z_OK)
-            throw Error("zlib failed to compress a tile");
+            throw Error(ErrorCode::internal, "zlib failed to compress a tile");
         if (bound < raw.size()) {
             packed.resize(bound);
             out.stored = std::move(packed);
@@ -95,7 +96,9 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
 DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& summary, std::uint32_t width,
                        std::uint32_t height, const TileLayout& layout, const ReaderOptions& limits,
                        const std::string& where, std::uint32_t originX, std::uint32_t originY) {
-    auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    auto fail = [&](const std::string& what, ErrorCode code = ErrorCode::corrupt) {
+        throw Error(code, concat(where, ": ", what));
+    };
     // Pixel p of the tile in level coordinates, as the validation errors below name it.
     auto pixelAt = [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); };
     DecodedTile tile;
@@ -112,7 +115,8 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     const std::uint32_t crc = crc32(stored.data(), stored.size());
     if (crc != summary.crc32) fail(concat("CRC-32 mismatch (stored ", summary.crc32, ", computed ", crc, ")"));
     if (summary.rawBytes > limits.maxTileBytes)
-        fail(concat("tile of ", summary.rawBytes, " bytes exceeds the reader's limit ", limits.maxTileBytes));
+        fail(concat("tile of ", summary.rawBytes, " bytes exceeds the reader's limit ", limits.maxTileBytes),
+             ErrorCode::limit);
     std::vector<std::uint8_t> inflated;
     std::span<const std::uint8_t> raw = stored;
     if (summary.storedBytes < summary.rawBytes) {
@@ -134,7 +138,8 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
         if (cumulative < previous) fail(concat(pixelAt(p), ": cumulative vertex count decreases"));
         if (cumulative - previous > limits.maxVerticesPerPixel)
             fail(concat(pixelAt(p), ": ", cumulative - previous, " vertices exceed the reader's limit ",
-                        limits.maxVerticesPerPixel));
+                        limits.maxVerticesPerPixel),
+                 ErrorCode::limit);
         tile.vertexStart[p + 1] = cumulative;
         previous = cumulative;
     }

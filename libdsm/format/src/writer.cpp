@@ -130,7 +130,9 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : im
     s.path = path;
     s.options = options;
     const std::string where = s.where();
-    auto fail = [&](const std::string& what) { throw Error(concat(where, ": ", what)); };
+    auto fail = [&](const std::string& what, ErrorCode code = ErrorCode::argument) {
+        throw Error(code, concat(where, ": ", what));
+    };
     if (options.width == 0 || options.height == 0 || options.width > (1u << 17) || options.height > (1u << 17))
         fail(concat("image size ", options.width, "x", options.height, " is not in [1, 131072]"));
     if (options.tileSize < format::kMinTileSize || options.tileSize > format::kMaxTileSize ||
@@ -190,27 +192,30 @@ std::uint32_t MapWriter::tileHeight(std::uint32_t ty) const {
 void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const VisibilityFunction> pixels) {
     Impl& s = *impl_;
     const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
-    if (s.finished) throw Error(concat(where, ": the file is already finished"));
+    if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
     if (tx >= tilesX() || ty >= tilesY())
-        throw Error(concat(where, ": outside the ", tilesX(), "x", tilesY(), " tiles of the map"));
-    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx]) throw Error(concat(where, ": written twice"));
+        throw Error(ErrorCode::argument, concat(where, ": outside the ", tilesX(), "x", tilesY(), " tiles of the map"));
+    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx])
+        throw Error(ErrorCode::argument, concat(where, ": written twice"));
     const std::uint32_t w = tileWidth(tx), h = tileHeight(ty);
     if (pixels.size() != std::size_t(w) * h)
-        throw Error(concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
+        throw Error(ErrorCode::argument, concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
     for (std::size_t p = 0; p < pixels.size(); ++p) {
         const VisibilityFunction& f = pixels[p];
         const std::string pixelWhere =
             concat(where, " pixel ", tx * s.options.tileSize + p % w, ",", ty * s.options.tileSize + p / w, ": ");
         if (f.channels() > s.options.channels)
-            throw Error(concat(pixelWhere, "RGB function in a monochrome map"));
+            throw Error(ErrorCode::argument, concat(pixelWhere, "RGB function in a monochrome map"));
         if (s.options.counts && !f.hasCounts() && !f.empty())
-            throw Error(concat(pixelWhere, "the map stores sample counts but the function has none"));
+            throw Error(ErrorCode::argument,
+                        concat(pixelWhere, "the map stores sample counts but the function has none"));
         if (static_cast<int>(f.layerCount()) > s.options.maxLayers)
-            throw Error(concat(pixelWhere, f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
+            throw Error(ErrorCode::argument,
+                        concat(pixelWhere, f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
         try {
             f.validate();
         } catch (const Error& e) {
-            throw Error(pixelWhere + e.what());
+            throw Error(e.code(), pixelWhere + e.what());
         }
     }
     std::vector<VisibilityFunction> copy(pixels.begin(), pixels.end());
@@ -219,11 +224,12 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const Vi
 
 void MapWriter::finish() {
     Impl& s = *impl_;
-    if (s.finished) throw Error(concat(s.where(), ": finish() called twice"));
+    if (s.finished) throw Error(ErrorCode::argument, concat(s.where(), ": finish() called twice"));
     for (std::uint32_t ty = 0; ty < tilesY(); ++ty)
         for (std::uint32_t tx = 0; tx < tilesX(); ++tx)
             if (!s.levels[0].written[std::size_t(ty) * tilesX() + tx])
-                throw Error(concat(s.where(), ": level 0 tile ", tx, ",", ty, " was never written"));
+                throw Error(ErrorCode::argument,
+                            concat(s.where(), ": level 0 tile ", tx, ",", ty, " was never written"));
 
     MapInfo info;
     info.width = s.options.width;

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
+#include <new>
 #include <vector>
 
 #include "dsm/error.h"
@@ -62,6 +64,7 @@ void axisWeights(PixelFilter filter, double c, double w, std::uint32_t extent, A
 struct LookupContext::Impl {
     std::shared_ptr<const DeepShadowMap> map;
     const DeepShadowMap::Impl* reader = nullptr;
+    LookupFailure failure;
 
     struct CachedTile {
         unsigned level = ~0u;
@@ -143,7 +146,7 @@ struct LookupContext::Impl {
 };
 
 LookupContext::LookupContext(std::shared_ptr<const DeepShadowMap> map) : impl_(std::make_unique<Impl>()) {
-    if (!map) throw Error("lookup: no map given");
+    if (!map) throw Error(ErrorCode::argument, "lookup: no map given");
     impl_->reader = &map->impl();
     impl_->map = std::move(map);
 }
@@ -156,10 +159,12 @@ LookupResult LookupContext::raster(double rx, double ry, double z, const LookupO
     Impl& s = *impl_;
     const MapInfo& info = s.reader->info;
     if (!std::isfinite(rx) || !std::isfinite(ry) || !std::isfinite(z))
-        throw Error(concat("lookup: point ", rx, ",", ry, " at depth ", z, " is not finite"));
+        throw Error(ErrorCode::argument, concat("lookup: point ", rx, ",", ry, " at depth ", z, " is not finite"));
     if (!std::isfinite(options.filterWidth) || options.filterWidth < 0.0)
-        throw Error(concat("lookup: filter width ", options.filterWidth, " is not a finite value >= 0"));
-    if (!std::isfinite(options.bias)) throw Error(concat("lookup: bias ", options.bias, " is not finite"));
+        throw Error(ErrorCode::argument,
+                    concat("lookup: filter width ", options.filterWidth, " is not a finite value >= 0"));
+    if (!std::isfinite(options.bias))
+        throw Error(ErrorCode::argument, concat("lookup: bias ", options.bias, " is not finite"));
     LookupResult result;
     result.channels = info.channels;
     // Points outside the raster [0, width] x [0, height] are lit (lookup.h),
@@ -208,7 +213,8 @@ LookupResult LookupContext::light(const std::array<double, 3>& p, const LookupOp
     double rx, ry, z;
     if (!info.camera.lightToRaster(p, static_cast<int>(info.width), static_cast<int>(info.height), rx, ry, z)) {
         if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
-            throw Error(concat("lookup: light-space point ", p[0], ",", p[1], ",", p[2], " is not finite"));
+            throw Error(ErrorCode::argument,
+                        concat("lookup: light-space point ", p[0], ",", p[1], ",", p[2], " is not finite"));
         LookupResult lit;
         lit.channels = info.channels;
         return lit;  // behind a perspective light
@@ -219,5 +225,61 @@ LookupResult LookupContext::light(const std::array<double, 3>& p, const LookupOp
 LookupResult LookupContext::world(const std::array<double, 3>& p, const LookupOptions& options) {
     return light(impl_->reader->info.camera.worldToLightSpace(p), options);
 }
+
+namespace {
+
+// Keeps why a lookup failed; a message that cannot be stored is left empty.
+void recordFailure(LookupFailure& failure, ErrorCode code, const char* message) noexcept {
+    failure.code = code;
+    try {
+        failure.message = message;
+    } catch (...) {
+        failure.message.clear();
+    }
+}
+
+// Runs a throwing lookup; on failure records why and gives the documented
+// failure value (lookup.h) instead.
+template <class Lookup>
+bool lookupWithoutThrowing(LookupFailure& failure, int channels, LookupResult& result, Lookup&& lookup) noexcept {
+    try {
+        result = lookup();
+        return true;
+    } catch (const Error& e) {
+        recordFailure(failure, e.code(), e.what());
+    } catch (const std::bad_alloc&) {
+        recordFailure(failure, ErrorCode::limit, "lookup: out of memory");
+    } catch (const std::exception& e) {
+        recordFailure(failure, ErrorCode::internal, e.what());
+    } catch (...) {
+        recordFailure(failure, ErrorCode::internal, "lookup: unknown failure");
+    }
+    result = LookupResult{};
+    result.channels = channels;
+    result.errorBound = 1.0;
+    return false;
+}
+
+}  // namespace
+
+bool LookupContext::tryRaster(double rx, double ry, double z, const LookupOptions& options,
+                              LookupResult& result) noexcept {
+    return lookupWithoutThrowing(impl_->failure, impl_->reader->info.channels, result,
+                                 [&] { return raster(rx, ry, z, options); });
+}
+
+bool LookupContext::tryLight(const std::array<double, 3>& p, const LookupOptions& options,
+                             LookupResult& result) noexcept {
+    return lookupWithoutThrowing(impl_->failure, impl_->reader->info.channels, result,
+                                 [&] { return light(p, options); });
+}
+
+bool LookupContext::tryWorld(const std::array<double, 3>& p, const LookupOptions& options,
+                             LookupResult& result) noexcept {
+    return lookupWithoutThrowing(impl_->failure, impl_->reader->info.channels, result,
+                                 [&] { return world(p, options); });
+}
+
+const LookupFailure& LookupContext::lastFailure() const noexcept { return impl_->failure; }
 
 }  // namespace dsm

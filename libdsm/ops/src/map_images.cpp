@@ -22,8 +22,8 @@ namespace {
 const LevelInfo& levelOf(const DeepShadowMap& map, unsigned level) {
     const auto& levels = map.info().levels;
     if (level >= levels.size())
-        throw Error(concat("'", map.path(), "': level ", level, " does not exist (", levels.size(),
-                           levels.size() == 1 ? " level)" : " levels)"));
+        throw Error(ErrorCode::argument, concat("'", map.path(), "': level ", level, " does not exist (", levels.size(),
+                                                levels.size() == 1 ? " level)" : " levels)"));
     return levels[level];
 }
 
@@ -60,7 +60,7 @@ FloatImage visibilityAt(const DeepShadowMap& map, unsigned level, double z) {
 }  // namespace
 
 FloatImage visibilitySlice(const DeepShadowMap& map, unsigned level, double z) {
-    if (std::isnan(z)) throw Error(concat("'", map.path(), "': slice depth is NaN"));
+    if (std::isnan(z)) throw Error(ErrorCode::argument, concat("'", map.path(), "': slice depth is NaN"));
     return visibilityAt(map, level, z);
 }
 

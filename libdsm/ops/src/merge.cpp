@@ -62,8 +62,8 @@ std::string numbers(const std::array<double, N>& values) {
 void requireSame(const std::string& field, const std::string& value, const std::string& firstValue,
                  const std::string& path, const std::string& firstPath) {
     if (value != firstValue)
-        throw Error(concat(quoted(path), ": ", field, " is ", value, " but ", firstValue, " in ", quoted(firstPath),
-                           ": the maps cannot be merged"));
+        throw Error(ErrorCode::argument, concat(quoted(path), ": ", field, " is ", value, " but ", firstValue, " in ",
+                                                quoted(firstPath), ": the maps cannot be merged"));
 }
 
 // The fields both modes need to agree on: the pixel grid and what a pixel means.
@@ -89,7 +89,7 @@ Json parseMetadata(const DeepShadowMap& map) {
 }
 
 void checkOutput(const std::vector<std::string>& inputs, const std::string& output) {
-    if (inputs.empty()) throw Error("merge: no input maps");
+    if (inputs.empty()) throw Error(ErrorCode::argument, "merge: no input maps");
     checkOutputPath(output);
     refuseOutputOverInputs(output, inputs);
 }
@@ -166,7 +166,8 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
         inputs.push_back({{"file", map->path()}, {"level0_error_bound", bound}, {"metadata", metadata}});
     }
     if (options.tolerance >= 0.0) tolerance = options.tolerance;
-    if (!std::isfinite(tolerance)) throw Error(concat("merge: tolerance ", tolerance, " is not finite"));
+    if (!std::isfinite(tolerance))
+        throw Error(ErrorCode::argument, concat("merge: tolerance ", tolerance, " is not finite"));
 
     VisibilityProductOptions product;
     product.tolerance = tolerance;
@@ -256,7 +257,8 @@ std::string rectText(const Rect& r) { return concat(r[0], ",", r[1], ",", r[2], 
 
 Rect regionOf(const DeepShadowMap& map, const Json& metadata) {
     const auto missing = [&](const std::string& why) {
-        return Error(concat(quoted(map.path()), ": ", why,
+        return Error(ErrorCode::argument,
+                     concat(quoted(map.path()), ": ", why,
                             ": stitching needs maps from dsm-build --region (metadata settings.region)"));
     };
     if (!metadata.is_object() || !metadata.contains("settings") || !metadata["settings"].is_object() ||
@@ -271,8 +273,8 @@ Rect regionOf(const DeepShadowMap& map, const Json& metadata) {
     }
     const MapInfo& info = map.info();
     if (r[0] >= r[2] || r[1] >= r[3] || r[2] > info.width || r[3] > info.height)
-        throw Error(concat(quoted(map.path()), ": settings.region ", rectText(r), " is empty or outside the ",
-                           info.width, "x", info.height, " image"));
+        throw Error(ErrorCode::argument, concat(quoted(map.path()), ": settings.region ", rectText(r),
+                                                " is empty or outside the ", info.width, "x", info.height, " image"));
     return r;
 }
 
@@ -312,7 +314,8 @@ void requireSameStitchSettings(const DeepShadowMap& map, const DeepShadowMap& fi
     metadata["settings"].erase("region");
     firstMetadata["settings"].erase("region");
     if (auto difference = firstDifference(firstMetadata, metadata, ""))
-        throw Error(concat(quoted(p), ": ", *difference, " in ", quoted(q), ": the maps are not parts of one build"));
+        throw Error(ErrorCode::argument,
+                    concat(quoted(p), ": ", *difference, " in ", quoted(q), ": the maps are not parts of one build"));
 }
 
 bool intersects(const Rect& a, const Rect& b) { return a[0] < b[2] && b[0] < a[2] && a[1] < b[3] && b[1] < a[3]; }
@@ -338,7 +341,7 @@ void requireTiling(const std::vector<Map>& maps, const std::vector<Rect>& region
                                   " of regions overlap: ");
         for (std::size_t k = 0; k < overlaps.size(); ++k) text += (k ? "; " : "") + overlaps[k];
         if (overlapCount > kListed) text += concat("; and ", overlapCount - kListed, " more");
-        throw Error(text);
+        throw Error(ErrorCode::argument, text);
     }
 
     // Holes: the grid of all region edges splits the image into cells that
@@ -369,7 +372,7 @@ void requireTiling(const std::vector<Map>& maps, const std::vector<Rect>& region
                                   " pixels uncovered, in ", holes, " rectangle", holes == 1 ? "" : "s", " (x0,y0,x1,y1): ");
         for (std::size_t k = 0; k < listed.size(); ++k) text += (k ? "; " : "") + listed[k];
         if (holes > kListed) text += concat("; and ", holes - kListed, " more");
-        throw Error(text);
+        throw Error(ErrorCode::argument, text);
     }
 }
 
@@ -491,13 +494,14 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
 
 MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string& output, const MergeOptions& options) {
     checkOutput(inputs, output);
-    if (options.zlibLevel > 9) throw Error(concat("merge: zlib level ", options.zlibLevel, " is not in [0, 9]"));
+    if (options.zlibLevel > 9)
+        throw Error(ErrorCode::argument, concat("merge: zlib level ", options.zlibLevel, " is not in [0, 9]"));
     const std::vector<Map> maps = openAll(inputs);
     switch (options.mode) {
         case MergeMode::Product: return multiplyMaps(maps, output, options);
         case MergeMode::Stitch: return stitchMaps(maps, output, options);
     }
-    throw Error("merge: unknown mode");
+    throw Error(ErrorCode::argument, "merge: unknown mode");
 }
 
 }  // namespace dsm

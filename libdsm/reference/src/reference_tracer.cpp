@@ -70,7 +70,7 @@ void throwIfEmbreeFailed(RTCDevice device, const std::string& doing) {
     if (code == RTC_ERROR_NONE) return;
     const std::string message = lastEmbreeMessage.empty() ? errorCodeName(code) : lastEmbreeMessage;
     lastEmbreeMessage.clear();
-    throw Error(detail::concat("reference tracer: Embree failed ", doing, ": ", message));
+    throw Error(ErrorCode::internal, detail::concat("reference tracer: Embree failed ", doing, ": ", message));
 }
 
 // Releases a geometry on every path out of the code that fills it (attached
@@ -317,8 +317,8 @@ struct ReferenceTracer::Impl {
         for (const auto& t : mesh.triangles)
             for (std::uint32_t k : t)
                 if (k >= mesh.positions.size())
-                    throw Error(detail::concat(what, ": triangle index ", k, " beyond ", mesh.positions.size(),
-                                               " positions"));
+                    throw Error(ErrorCode::scene, detail::concat(what, ": triangle index ", k, " beyond ",
+                                                                 mesh.positions.size(), " positions"));
         std::vector<Vec3> world;
         world.reserve(mesh.positions.size());
         for (const auto& p : mesh.positions) world.push_back(transformPoint(toWorld, Vec3{p[0], p[1], p[2]}));
@@ -351,13 +351,14 @@ struct ReferenceTracer::Impl {
     void addCurves(std::uint32_t object, const SceneObject& o, const Curves& curves, const std::string& what) {
         const Affine toWorld = affineOf(o.objectToWorld);
         if (curves.widths.size() != 1 && curves.widths.size() != curves.points.size())
-            throw Error(detail::concat(what, ": ", curves.widths.size(), " widths for ", curves.points.size(),
-                                       " points (need 1 or one per point)"));
+            throw Error(ErrorCode::scene, detail::concat(what, ": ", curves.widths.size(), " widths for ",
+                                                         curves.points.size(), " points (need 1 or one per point)"));
         std::vector<unsigned> firstOfSegment;
         std::size_t first = 0;
         for (std::uint32_t n : curves.pointsPerCurve) {
             if (first + n > curves.points.size())
-                throw Error(detail::concat(what, ": curves need ", first + n, " points, have ", curves.points.size()));
+                throw Error(ErrorCode::scene,
+                            detail::concat(what, ": curves need ", first + n, " points, have ", curves.points.size()));
             for (std::uint32_t k = 0; k + 1 < n; ++k) firstOfSegment.push_back(static_cast<unsigned>(first + k));
             first += n;
         }
@@ -388,7 +389,8 @@ struct ReferenceTracer::Impl {
     }
 
     void addVolume(std::uint32_t object, const SceneObject& o, const Volume& volume, const std::string& what) {
-        if (!(volume.step > 0.0)) throw Error(detail::concat(what, ": volume step ", volume.step, " is not > 0"));
+        if (!(volume.step > 0.0))
+            throw Error(ErrorCode::scene, detail::concat(what, ": volume step ", volume.step, " is not > 0"));
         volumes.push_back({object, inverseAffine(affineOf(o.objectToWorld), what), volume.boundsMin, volume.boundsMax,
                            makeDensityField(volume), volume.scale, volume.step, o.motion});
     }
@@ -412,8 +414,8 @@ struct ReferenceTracer::Impl {
         const double step = v.step / volumeStepDivisor;
         const double steps = std::max(1.0, std::ceil((s1 - s0) * length / step));
         if (steps > kMaxMarchSteps)
-            throw Error(detail::concat("reference tracer: volume of object ", v.object, ": ", steps,
-                                       " march steps along one ray; raise its step"));
+            throw Error(ErrorCode::limit, detail::concat("reference tracer: volume of object ", v.object, ": ", steps,
+                                                         " march steps along one ray; raise its step"));
         const auto n = static_cast<std::uint64_t>(steps);
         const double ds = (s1 - s0) / steps;
         double sum = 0.0;
@@ -429,7 +431,8 @@ ReferenceTracer::ReferenceTracer(const Scene& scene, const ReferenceTracerOption
     : impl_(std::make_unique<Impl>()) {
     Impl& s = *impl_;
     if (options.volumeStepDivisor < 1)
-        throw Error(detail::concat("reference tracer: volumeStepDivisor ", options.volumeStepDivisor, " is not >= 1"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("reference tracer: volumeStepDivisor ", options.volumeStepDivisor, " is not >= 1"));
     s.volumeStepDivisor = options.volumeStepDivisor;
     s.device = rtcNewDevice(nullptr);
     if (s.device == nullptr) throwIfEmbreeFailed(nullptr, "creating a device");
@@ -441,7 +444,7 @@ ReferenceTracer::ReferenceTracer(const Scene& scene, const ReferenceTracerOption
     for (std::uint32_t o = 0; o < scene.objects.size(); ++o) {
         const SceneObject& object = scene.objects[o];
         const std::string what = detail::concat("object ", o, " '", object.name, "'");
-        if (!isFinite(object.motion)) throw Error(detail::concat(what, ": motion is not finite"));
+        if (!isFinite(object.motion)) throw Error(ErrorCode::scene, detail::concat(what, ": motion is not finite"));
         std::visit(
             [&](const auto& g) {
                 using G = std::decay_t<decltype(g)>;
@@ -470,7 +473,8 @@ namespace {
 
 void checkTime(double time, const char* what) {
     if (!(time >= 0.0 && time <= 1.0))
-        throw Error(detail::concat("reference tracer: ", what, ": time ", time, " is outside [0, 1]"));
+        throw Error(ErrorCode::argument,
+                    detail::concat("reference tracer: ", what, ": time ", time, " is outside [0, 1]"));
 }
 
 RTCRay embreeRay(const Vec3& origin, const Vec3& direction, double tMax, double time) {
@@ -495,12 +499,13 @@ RTCRay embreeRay(const Vec3& origin, const Vec3& direction, double tMax, double 
 std::array<double, 3> ReferenceTracer::transmittance(const Vec3& from, const Vec3& to, double time) const {
     const Impl& s = *impl_;
     if (!isFinite(from) || !isFinite(to))
-        throw Error("reference tracer: transmittance: a segment end is not finite");
+        throw Error(ErrorCode::argument, "reference tracer: transmittance: a segment end is not finite");
     checkTime(time, "transmittance");
     const Vec3 delta = sub(to, from);
     const double length = std::sqrt(dot(delta, delta));
     if (length == 0.0) return {1.0, 1.0, 1.0};
-    if (!std::isfinite(length)) throw Error("reference tracer: transmittance: the segment is too long");
+    if (!std::isfinite(length))
+        throw Error(ErrorCode::argument, "reference tracer: transmittance: the segment is too long");
 
     // Reused per thread: no allocation per ray once warm.
     thread_local std::vector<Crossing> crossings;
@@ -556,11 +561,12 @@ std::array<double, 3> ReferenceTracer::transmittance(const Vec3& from, const Vec
 std::optional<RayHit> ReferenceTracer::closestHit(const Vec3& origin, const Vec3& direction, double tMax,
                                                   double time) const {
     const Impl& s = *impl_;
-    if (!isFinite(origin)) throw Error("reference tracer: closestHit: the origin is not finite");
+    if (!isFinite(origin)) throw Error(ErrorCode::argument, "reference tracer: closestHit: the origin is not finite");
     const double length = std::sqrt(dot(direction, direction));
     if (!(length > 0.0) || !std::isfinite(length))
-        throw Error("reference tracer: closestHit: the direction is zero or not finite");
-    if (!(tMax >= 0.0)) throw Error(detail::concat("reference tracer: closestHit: tMax ", tMax, " is not >= 0"));
+        throw Error(ErrorCode::argument, "reference tracer: closestHit: the direction is zero or not finite");
+    if (!(tMax >= 0.0))
+        throw Error(ErrorCode::argument, detail::concat("reference tracer: closestHit: tMax ", tMax, " is not >= 0"));
     checkTime(time, "closestHit");
 
     TraceContext c;

@@ -47,24 +47,25 @@ AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, doubl
     camera.validate();
     const char* what = shape == AreaLightShape::Disk ? "disk" : "rectangle";
     if (camera.projection != Projection::Perspective)
-        throw Error(concat("area light: the ", what, " needs a perspective (spot) light camera"));
+        throw Error(ErrorCode::argument, concat("area light: the ", what, " needs a perspective (spot) light camera"));
     if (!(halfWidth > 0.0) || !(halfHeight > 0.0) || !std::isfinite(halfWidth) || !std::isfinite(halfHeight))
-        throw Error(concat("area light: ", what, " size ", halfWidth, " x ", halfHeight, " is not finite and > 0"));
+        throw Error(ErrorCode::argument,
+                    concat("area light: ", what, " size ", halfWidth, " x ", halfHeight, " is not finite and > 0"));
     const auto& w = camera.screenWindow;
     // Half-angles (as tangents) of the frustum about the axis, per axis.
     const double tanX = std::min(w[1], -w[0]), tanY = std::min(w[3], -w[2]);
     if (!(tanX > 0.0) || !(tanY > 0.0))
-        throw Error(concat("area light: the light camera's window [", w[0], ", ", w[1], "] x [", w[2], ", ", w[3],
-                           "] does not contain its axis"));
+        throw Error(ErrorCode::argument, concat("area light: the light camera's window [", w[0], ", ", w[1], "] x [",
+                                                w[2], ", ", w[3], "] does not contain its axis"));
     const double fit = std::max(halfWidth / tanX, halfHeight / tanY);  // smallest plane depth that fits
     if (planeDepth < 0.0) planeDepth = fit;
     if (!std::isfinite(planeDepth))
-        throw Error(concat("area light: plane depth ", planeDepth, " is not finite"));
+        throw Error(ErrorCode::argument, concat("area light: plane depth ", planeDepth, " is not finite"));
     // A light wider than the frustum at its plane sends rays the map never saw.
     if (planeDepth < fit * (1.0 - 1e-9))
-        throw Error(concat("area light: the ", what, " (half-size ", halfWidth, " x ", halfHeight,
-                           ") does not fit the map's frustum at plane depth ", planeDepth, " (needs >= ", fit,
-                           "): the map was built for a smaller area light"));
+        throw Error(ErrorCode::argument, concat("area light: the ", what, " (half-size ", halfWidth, " x ", halfHeight,
+                                                ") does not fit the map's frustum at plane depth ", planeDepth,
+                                                " (needs >= ", fit, "): the map was built for a smaller area light"));
 
     const detail::Affine lightToWorld = detail::inverseAffine(
         detail::affineOf(camera.worldToLight), "area light: the light camera's world-to-light matrix");
@@ -110,7 +111,8 @@ AreaLight AreaLight::forMap(const MapInfo& info, AreaLightShape shape, double ha
         return make(info.camera, shape, halfWidth, halfHeight, -1.0);
     const double built = recordedRadius(info);
     if (!(built > 0.0))
-        throw Error("area light: the map records no area-light radius (build it from a scene whose light has "
+        throw Error(ErrorCode::argument,
+                    "area light: the map records no area-light radius (build it from a scene whose light has "
                     "area_radius); its light is a point");
     return make(info.camera, shape, halfWidth, shape == AreaLightShape::Disk ? halfWidth : halfHeight,
                 disk(info.camera, built).planeDepth());
@@ -129,9 +131,10 @@ Vec3 AreaLight::lightToWorld(const Vec3& p) const {
 
 void AreaLight::lightSpaceSamples(const Vec3& receiver, int count, std::uint64_t seed, std::vector<Vec3>& out) const {
     out.clear();
-    if (count < 1) throw Error(concat("area light: sample count ", count, " is not >= 1"));
+    if (count < 1) throw Error(ErrorCode::argument, concat("area light: sample count ", count, " is not >= 1"));
     if (!std::isfinite(receiver[0]) || !std::isfinite(receiver[1]) || !std::isfinite(receiver[2]))
-        throw Error(concat("area light: receiver ", receiver[0], ",", receiver[1], ",", receiver[2], " is not finite"));
+        throw Error(ErrorCode::argument,
+                    concat("area light: receiver ", receiver[0], ",", receiver[1], ",", receiver[2], " is not finite"));
     // Seeded by the receiver's bits (+0.0 and -0.0 alike), so the samples of
     // a point never change between frames or threads.
     std::uint64_t s = detail::mix64(seed ^ 0x5DEECE66Dull);

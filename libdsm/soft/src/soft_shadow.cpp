@@ -25,12 +25,13 @@ struct SoftShadowTracer::Impl {
 
 SoftShadowTracer::SoftShadowTracer(std::shared_ptr<const DeepShadowMap> map, const AreaLight& light)
     : impl_(std::make_unique<Impl>(Impl{nullptr, light, nullptr, nullptr})) {
-    if (!map) throw Error("soft shadow: no map given");
+    if (!map) throw Error(ErrorCode::argument, "soft shadow: no map given");
     const MapInfo& info = map->info();
     if (!(light.camera() == info.camera))
-        throw Error(concat("soft shadow: '", map->path(), "': the area light was made for another light camera"));
+        throw Error(ErrorCode::argument,
+                    concat("soft shadow: '", map->path(), "': the area light was made for another light camera"));
     if (info.width == 0 || info.height == 0 || info.levels.empty())
-        throw Error(concat("soft shadow: '", map->path(), "': the map is empty"));
+        throw Error(ErrorCode::argument, concat("soft shadow: '", map->path(), "': the map is empty"));
     impl_->hierarchy = std::make_unique<detail::DepthHierarchy>(*map);
     impl_->reader = &map->impl();
     impl_->map = std::move(map);
@@ -349,16 +350,21 @@ struct SoftShadowContext::Impl {
 
     void check(const Vec3& p, const SoftShadowOptions& o) const {
         if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
-            throw Error(concat("soft shadow: receiver ", p[0], ",", p[1], ",", p[2], " is not finite"));
+            throw Error(ErrorCode::argument,
+                        concat("soft shadow: receiver ", p[0], ",", p[1], ",", p[2], " is not finite"));
         if (o.samples < 1 || o.samples > (1 << 20))
-            throw Error(concat("soft shadow: sample count ", o.samples, " is not in [1, 1048576]"));
-        if (o.layers < 0) throw Error(concat("soft shadow: layer count ", o.layers, " is negative"));
+            throw Error(ErrorCode::argument,
+                        concat("soft shadow: sample count ", o.samples, " is not in [1, 1048576]"));
+        if (o.layers < 0)
+            throw Error(ErrorCode::argument, concat("soft shadow: layer count ", o.layers, " is negative"));
         if (!(o.zThreshold >= 0.0) || !std::isfinite(o.zThreshold))
-            throw Error(concat("soft shadow: z threshold ", o.zThreshold, " is not a finite value >= 0"));
+            throw Error(ErrorCode::argument,
+                        concat("soft shadow: z threshold ", o.zThreshold, " is not a finite value >= 0"));
         if (!(o.bias >= 0.0) || !std::isfinite(o.bias))
-            throw Error(concat("soft shadow: bias ", o.bias, " is not a finite value >= 0"));
+            throw Error(ErrorCode::argument, concat("soft shadow: bias ", o.bias, " is not a finite value >= 0"));
         if (!(o.visibilityThreshold >= 0.0 && o.visibilityThreshold <= 1.0))
-            throw Error(concat("soft shadow: visibility threshold ", o.visibilityThreshold, " is not in [0, 1]"));
+            throw Error(ErrorCode::argument,
+                        concat("soft shadow: visibility threshold ", o.visibilityThreshold, " is not in [0, 1]"));
     }
 
     // The receiver in light space and raster; false when it is lit by rule
@@ -388,7 +394,7 @@ struct SoftShadowContext::Impl {
 
 SoftShadowContext::SoftShadowContext(std::shared_ptr<const SoftShadowTracer> tracer)
     : impl_(std::make_unique<Impl>()) {
-    if (!tracer) throw Error("soft shadow: no tracer given");
+    if (!tracer) throw Error(ErrorCode::argument, "soft shadow: no tracer given");
     impl_->shared = &tracer->impl();
     impl_->lookup = std::make_unique<LookupContext>(impl_->shared->map);
     impl_->tracer = std::move(tracer);

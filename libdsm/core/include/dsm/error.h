@@ -28,8 +28,6 @@ const char* errorCodeName(ErrorCode code) noexcept;
 class Error : public std::runtime_error {
 public:
     Error(ErrorCode code, const std::string& message);
-    /// A failure not yet classified; reported as ErrorCode::internal.
-    explicit Error(const std::string& message);
 
     ErrorCode code() const noexcept { return code_; }
 

@@ -6,6 +6,7 @@
 #include <string>
 
 #include "dsm/map_info.h"
+#include "dsm/map_input.h"
 #include "dsm/tile_cache.h"
 #include "dsm/visibility.h"
 
@@ -57,6 +58,10 @@ struct TileSummary {
 class DeepShadowMap {
 public:
     static std::shared_ptr<DeepShadowMap> open(const std::string& path, const ReaderOptions& options = {});
+    /// Opens a map from memory or the caller's reads (see MapInput); `name` is
+    /// what path() returns and messages quote.
+    static std::shared_ptr<DeepShadowMap> open(std::shared_ptr<const MapInput> input, const std::string& name,
+                                               const ReaderOptions& options = {});
     ~DeepShadowMap();
     DeepShadowMap(const DeepShadowMap&) = delete;
     DeepShadowMap& operator=(const DeepShadowMap&) = delete;
@@ -84,5 +89,7 @@ private:
 /// monotonicity, counts) and the directory's totals. Throws dsm::Error naming
 /// the file, level, tile and pixel of the first problem.
 void validate(const std::string& path, const ReaderOptions& options = {});
+/// validate() for a map read through a MapInput; `name` is what messages quote.
+void validate(std::shared_ptr<const MapInput> input, const std::string& name, const ReaderOptions& options = {});
 
 }  // namespace dsm

@@ -5,7 +5,9 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <string>
 
+#include "dsm/error.h"
 #include "dsm/map_info.h"
 #include "dsm/reader.h"
 
@@ -44,6 +46,13 @@ struct LookupResult {
     int pixelsUsed = 0;
 };
 
+/// Why a non-throwing lookup (LookupContext::tryRaster and the others) failed.
+struct LookupFailure {
+    ErrorCode code = ErrorCode::internal;
+    /// One line, as dsm::Error's message.
+    std::string message;
+};
+
 /// Lookups for one thread. Keeps the last few tiles it touched (so coherent
 /// lookups rarely reach the shared cache) and, per recently used pixel, the
 /// segment of the last evaluation, searching forward or backward from it
@@ -66,6 +75,18 @@ public:
     LookupResult light(const std::array<double, 3>& p, const LookupOptions& options = {});
     /// Point in world space, through the map's light camera.
     LookupResult world(const std::array<double, 3>& p, const LookupOptions& options = {});
+
+    /// The three lookups above for shading loops: they never throw. On success
+    /// they fill `result` and return true. On failure (a point or option out of
+    /// range, a tile that cannot be read or is corrupt, memory) they return
+    /// false and set `result` to the documented failure value, lit with no
+    /// confidence: v = {1, 1, 1}, errorBound = 1, pixelsUsed = 0; lastFailure()
+    /// then says why.
+    bool tryRaster(double rx, double ry, double z, const LookupOptions& options, LookupResult& result) noexcept;
+    bool tryLight(const std::array<double, 3>& p, const LookupOptions& options, LookupResult& result) noexcept;
+    bool tryWorld(const std::array<double, 3>& p, const LookupOptions& options, LookupResult& result) noexcept;
+    /// The failure of the last try* lookup that returned false.
+    const LookupFailure& lastFailure() const noexcept;
 
     /// Number of segment steps taken by the per-pixel cursors (coherence).
     std::uint64_t cursorSteps() const;

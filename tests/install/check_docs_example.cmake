@@ -1,0 +1,15 @@
+# docs/c-api.md shows the complete C example as it is: its last ```c block is
+# tests/install/consumer_c/main.c, byte for byte. -DDOC=... -DPROGRAM=...
+file(READ "${DOC}" doc)
+file(READ "${PROGRAM}" program)
+string(FIND "${doc}" "```c\n" start REVERSE)
+if(start EQUAL -1)
+  message(FATAL_ERROR "${DOC}: no ```c block")
+endif()
+math(EXPR start "${start} + 5")
+string(SUBSTRING "${doc}" ${start} -1 rest)
+string(FIND "${rest}" "```" end)
+string(SUBSTRING "${rest}" 0 ${end} example)
+if(NOT example STREQUAL program)
+  message(FATAL_ERROR "${DOC}: the complete example differs from ${PROGRAM}; copy the program into the page")
+endif()
