@@ -39,7 +39,7 @@ AreaLightSize parseAreaLightSize(std::string_view text) {
             }
         }
     }
-    throw Error(concat("area light '", text, "': expected disk:R or rect:W,H with sizes > 0 (light-space units)"));
+    throw Error(ErrorCode::argument, concat("area light '", text, "': expected disk:R or rect:W,H with sizes > 0 (light-space units)"));
 }
 
 }  // namespace dsm

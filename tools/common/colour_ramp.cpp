@@ -13,7 +13,7 @@ using detail::concat;
 
 FloatImage colourRamp(const FloatImage& image, float maximum) {
     if (image.channels != 1)
-        throw Error(concat("colour ramp: expected a one-channel image, got ", image.channels, " channels"));
+        throw Error(ErrorCode::argument, concat("colour ramp: expected a one-channel image, got ", image.channels, " channels"));
     // Luminance rises along the ramp, so it still reads in grey.
     static constexpr std::array<std::array<float, 3>, 5> kStops{{
         {0.0f, 0.0f, 0.0f},
