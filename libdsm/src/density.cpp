@@ -17,7 +17,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 namespace {
 
 /// A field that is 0 outside its closed box.
@@ -259,4 +259,4 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
     }
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

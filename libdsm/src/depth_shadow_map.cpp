@@ -16,16 +16,18 @@
 #include "ray_caster.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
 DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions& options) {
     DepthShadowMap map;
-    map.width_ = options.width ? options.width : scene.light.width;
-    map.height_ = options.height ? options.height : scene.light.height;
+    map.width_ = options.width.value_or(scene.light.width);
+    map.height_ = options.height.value_or(scene.light.height);
     if (map.width_ == 0 || map.height_ == 0 || map.width_ > (1u << 17) || map.height_ > (1u << 17))
         throw Error(concat("depth shadow map: size ", map.width_, "x", map.height_, " is empty or too large"));
+    if (options.threads && *options.threads < 1)
+        throw Error(ErrorCode::argument, "depth shadow map: worker thread count 0 is not >= 1");
     LightDescription light = scene.light;
     light.width = map.width_;
     light.height = map.height_;
@@ -34,7 +36,7 @@ DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions&
 
     const detail::LightRayFrame frame = detail::lightRayFrame(map.camera_, map.width_, map.height_);
     const RayCaster caster(scene);
-    tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic : static_cast<int>(options.threads));
+    tbb::task_arena arena(options.threads ? static_cast<int>(*options.threads) : tbb::task_arena::automatic);
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, map.height_), [&](const auto& rows) {
             std::vector<RaySurfaceHit> hits;
@@ -132,4 +134,4 @@ std::uint64_t DepthShadowMap::writeExr(const std::string& path) const {
     return std::filesystem::file_size(path);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -1,6 +1,6 @@
 #include "dsm/error.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 const char* errorCodeName(ErrorCode code) noexcept {
     switch (code) {
@@ -20,4 +20,4 @@ Error::Error(ErrorCode code, const std::string& message) : std::runtime_error(me
 
 Error::Error(const std::string& message) : Error(ErrorCode::internal, message) {}
 
-}  // namespace dsm
+DSM_NAMESPACE_END

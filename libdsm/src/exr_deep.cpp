@@ -52,7 +52,7 @@
 #include "dsm/writer.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -605,7 +605,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     report.height = level.height;
     report.channels = info.channels;
     report.maxDeviation =
-        options.maxDeviation > 0.0 ? options.maxDeviation : std::clamp(level.tolerance / 2.0, 1e-5, 1e-3);
+        options.maxDeviation.value_or(std::clamp(level.tolerance / 2.0, 1e-5, 1e-3));
     if (!std::isfinite(report.maxDeviation))
         throw Error(concat("deep EXR export: the largest deviation must be finite, got ", report.maxDeviation));
     if (options.tiled && (options.tileSize < 1 || options.tileSize > 65536))
@@ -848,15 +848,18 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
                             std::uint32_t height) {
     LightCamera cam;
     double half = 0.0;
-    if (options.fieldOfView > 0.0) {
-        if (!(options.fieldOfView < 180.0))
-            throw Error(concat("field of view ", options.fieldOfView, " is not below 180 degrees"));
+    if (options.fieldOfView) {
+        const double degrees = *options.fieldOfView;
+        if (!(degrees > 0.0 && degrees < 180.0))
+            throw Error(ErrorCode::argument, concat("field of view ", degrees, " is not in (0, 180) degrees"));
         cam.projection = Projection::Perspective;
-        half = std::tan(options.fieldOfView * std::numbers::pi / 360.0);
+        half = std::tan(degrees * std::numbers::pi / 360.0);
     } else {
-        if (!std::isfinite(options.orthoWidth)) throw Error("the orthographic width must be finite");
+        const double width = options.orthoWidth.value_or(0.0);
+        if (!std::isfinite(width) || !(width > 0.0))
+            throw Error(ErrorCode::argument, concat("the orthographic width ", width, " is not a finite value > 0"));
         cam.projection = Projection::Orthographic;
-        half = options.orthoWidth / 2.0;
+        half = width / 2.0;
     }
     const double halfHeight = half * double(height) / double(width);
     cam.screenWindow = {-half, half, -halfHeight, halfHeight};
@@ -884,9 +887,9 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
         if (options.camera) {
             w.camera = *options.camera;
             report.cameraSource = "option";
-        } else if (options.fieldOfView > 0.0 || options.orthoWidth > 0.0) {
+        } else if (options.fieldOfView || options.orthoWidth) {
             w.camera = cameraFromWidth(h, options, report.width, report.height);
-            report.cameraSource = options.fieldOfView > 0.0 ? "field of view" : "orthographic width";
+            report.cameraSource = options.fieldOfView ? "field of view" : "orthographic width";
         } else {
             std::optional<LightCamera> cam;
             try {
@@ -901,14 +904,14 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
             w.camera = *cam;
         }
         const auto* fileTolerance = findAttribute<Imf::DoubleAttribute>(h, "dsm:tolerance");
-        report.tolerance = options.tolerance >= 0.0 ? options.tolerance
+        report.tolerance = options.tolerance ? *options.tolerance
                            : fileTolerance && fileTolerance->value() >= 0.0 && std::isfinite(fileTolerance->value())
                                ? fileTolerance->value()
                                : kDefaultExrImportTolerance;
-        if (!std::isfinite(report.tolerance))
-            throw Error(concat("the tolerance must be finite, got ", report.tolerance));
-        report.maxLinearError =
-            options.maxLinearError > 0.0 ? options.maxLinearError : std::clamp(report.tolerance / 4.0, 1e-5, 1e-3);
+        if (!std::isfinite(report.tolerance) || report.tolerance < 0.0)
+            throw Error(ErrorCode::argument,
+                        concat("the tolerance must be a finite value >= 0, got ", report.tolerance));
+        report.maxLinearError = options.maxLinearError.value_or(std::clamp(report.tolerance / 4.0, 1e-5, 1e-3));
 
         w.width = report.width;
         w.height = report.height;
@@ -978,4 +981,4 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
     }
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

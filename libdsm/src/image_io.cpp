@@ -17,7 +17,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -157,4 +157,4 @@ FloatImage readImage(const std::string& path) {
     return image;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -6,7 +6,7 @@
 
 #include <nlohmann/json.hpp>
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -100,4 +100,4 @@ std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent
     return j.dump(indent, ' ', false, Json::error_handler_t::replace);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

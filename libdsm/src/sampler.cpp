@@ -22,7 +22,7 @@
 #include "ray_caster.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -69,11 +69,13 @@ struct TileStats {
 BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
     const auto wallStart = Clock::now();
     LightDescription light = scene.light;
-    if (options.width) light.width = options.width;
-    if (options.height) light.height = options.height;
+    if (options.width) light.width = *options.width;
+    if (options.height) light.height = *options.height;
     const std::uint32_t W = light.width, H = light.height;
     const std::string where = concat("build '", path, "'");
     if (W == 0 || H == 0) throw Error(concat(where, ": resolution ", W, "x", H, " is empty"));
+    if (options.threads && *options.threads < 1)
+        throw Error(ErrorCode::argument, concat(where, ": worker thread count 0 is not >= 1"));
     if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
         throw Error(concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
     if (!std::isfinite(options.filterWidth) || options.filterWidth <= 0.0 || options.filterWidth > 64.0)
@@ -91,8 +93,9 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     const int channels = scene.isColoured() ? 3 : 1;
     const bool counts = options.counts || options.mtsmLayers > 1;
     const std::uint32_t spp = options.samplesPerPixel;
-    const double tolerance = options.tolerance < 0.0 ? autoTolerance(spp) : options.tolerance;
-    if (!std::isfinite(tolerance)) throw Error(concat(where, ": tolerance ", tolerance, " is not finite"));
+    const double tolerance = options.tolerance.value_or(autoTolerance(spp));
+    if (!std::isfinite(tolerance) || tolerance < 0.0)
+        throw Error(ErrorCode::argument, concat(where, ": tolerance ", tolerance, " is not a finite value >= 0"));
     const double radius = 0.5 * options.filterWidth;
     const int reach = std::max(0, static_cast<int>(std::ceil(radius - 0.5)));  // neighbour pixels with samples in range
     const std::uint32_t gridY = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(spp)))));
@@ -241,7 +244,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     BuildStats result;
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
-    tbb::task_arena arena(options.threads == 0 ? tbb::task_arena::automatic : static_cast<int>(options.threads));
+    tbb::task_arena arena(options.threads ? static_cast<int>(*options.threads) : tbb::task_arena::automatic);
     std::vector<std::vector<VisibilityFunction>> rowTiles(tilesX);
     std::vector<TileStats> rowStats(tilesX);
     for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
@@ -279,4 +282,4 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     return result;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -25,7 +25,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 namespace {
 
 using json = nlohmann::json;
@@ -953,4 +953,4 @@ Scene loadScene(const std::string& path) {
     return parseScene(text, std::filesystem::path(path).parent_path().string(), path);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -45,7 +45,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -218,4 +218,4 @@ TileCacheStats TileCache::stats() const { return impl_->stats(); }
 void TileCache::resetStats() { impl_->resetStats(); }
 void TileCache::clear() { impl_->clear(); }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -77,6 +77,7 @@ int main(int argc, char** argv) {
     std::string scenePath, output, resolution, tolerance = "auto", filter = "gaussian", mipLevels = "auto", region;
     std::string statsJson;
     dsm::BuildOptions options;
+    unsigned threads = 0;
     bool quiet = false;
     app.add_option("scene", scenePath, "Scene description (JSON, see spec/scene.md); - reads stdin")->required();
     app.add_option("-o,--output", output, "Output .dsm file")->required();
@@ -96,7 +97,7 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_option("--region", region, "Build only pixels X0,Y0,X1,Y1 (half-open), for distributed builds");
-    app.add_option("-j,--threads", options.threads, "Worker threads (0 = all cores)")->capture_default_str();
+    app.add_option("-j,--threads", threads, "Worker threads (0 = all cores)")->capture_default_str();
     app.add_option("--seed", options.seed, "Random seed (a non-negative integer)")
         ->check(CLI::Validator(
             [](std::string& text) {
@@ -139,9 +140,10 @@ int main(int argc, char** argv) {
             options.width = w;
             options.height = h;
         }
+        if (threads != 0) options.threads = threads;  // 0: all cores
         double value = 0.0;
         try {
-            options.tolerance = parseAutoOr(tolerance, value) ? value : -1.0;
+            if (parseAutoOr(tolerance, value)) options.tolerance = value;
             if (parseAutoOr(mipLevels, value)) {
                 if (value < 1.0 || value != std::floor(value)) throw std::invalid_argument(mipLevels);
                 options.mipLevels = static_cast<unsigned>(value);
@@ -149,7 +151,7 @@ int main(int argc, char** argv) {
         } catch (const std::exception&) {
             throw std::invalid_argument("--tolerance and --mip-levels expect auto or a number");
         }
-        if (tolerance != "auto" && !(options.tolerance >= 0.0))
+        if (options.tolerance && !(*options.tolerance >= 0.0))
             throw std::invalid_argument("--tolerance expects auto or a value >= 0, got '" + tolerance + "'");
         options.filter = *dsm::pixelFilterFromName(filter);  // CLI11 checked the name
         if (!region.empty()) {

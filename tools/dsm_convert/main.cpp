@@ -53,19 +53,22 @@ int main(int argc, char** argv) {
                         ->type_name("N")
                         ->check(CLI::Range(1u, 65536u))
                         ->needs(tiled);
-    auto* deviation = app.add_option("--max-deviation", exportOptions.maxDeviation,
+    double maxDeviation = 0.0;
+    auto* deviation = app.add_option("--max-deviation", maxDeviation,
                                      ".dsm -> .exr: bound on |EXR transmittance - map visibility| from the "
                                      "exponential reading of volume samples (default clamp(tolerance/2, 1e-5, 1e-3))")
                           ->type_name("D")
                           ->check(CLI::PositiveNumber);
 
     dsm::ExrImportOptions importOptions;
-    auto* tolerance = app.add_option("-e,--tolerance", importOptions.tolerance,
+    double importTolerance = 0.0, maxLinearError = 0.0, fieldOfView = 0.0, orthoWidth = 0.0;
+    unsigned mipLevels = 0;
+    auto* tolerance = app.add_option("-e,--tolerance", importTolerance,
                                      ".exr -> .dsm: compression tolerance (default: the file's dsm:tolerance, "
                                      "else 1/256)")
                           ->type_name("E")
                           ->check(CLI::NonNegativeNumber);
-    auto* linear = app.add_option("--max-linear-error", importOptions.maxLinearError,
+    auto* linear = app.add_option("--max-linear-error", maxLinearError,
                                   ".exr -> .dsm: bound on the chords that replace exponential volume samples "
                                   "(default clamp(tolerance/4, 1e-5, 1e-3))")
                        ->type_name("D")
@@ -73,7 +76,7 @@ int main(int argc, char** argv) {
     std::string cameraFrom;
     auto* cameraMap = app.add_option("--camera-from", cameraFrom, ".exr -> .dsm: take the light camera of this map")
                           ->type_name("MAP.dsm");
-    auto* fov = app.add_option("--fov", importOptions.fieldOfView,
+    auto* fov = app.add_option("--fov", fieldOfView,
                                ".exr -> .dsm: perspective light of this horizontal field of view (degrees), placed "
                                "by the file's worldToCamera")
                     ->type_name("DEG")
@@ -89,14 +92,14 @@ int main(int argc, char** argv) {
                                                                     : std::string("expects degrees in (0, 180)");
                         },
                         "DEG", "in (0, 180)"));
-    auto* ortho = app.add_option("--ortho-width", importOptions.orthoWidth,
+    auto* ortho = app.add_option("--ortho-width", orthoWidth,
                                  ".exr -> .dsm: orthographic light with a window this wide (light units)")
                       ->type_name("W")
                       ->check(CLI::PositiveNumber);
     auto* mapTile = app.add_option("-t,--tile-size", importOptions.tileSize,
                                    ".exr -> .dsm: map tile edge, a power of two 2..4096 (default 32)")
                         ->type_name("N");
-    auto* mips = app.add_option("-m,--mip-levels", importOptions.mipLevels,
+    auto* mips = app.add_option("-m,--mip-levels", mipLevels,
                                 ".exr -> .dsm: mip levels, 0 = full pyramid (default), 1 = none")
                      ->type_name("N");
     bool quiet = false;
@@ -123,6 +126,12 @@ int main(int argc, char** argv) {
     app.footer("Exit status: 0 on success, 1 when a file cannot be read, converted or written, 2 on a usage "
                "error.\nDocumentation: docs/dsm-convert.md");
     if (const int status = dsm::tools::parseArguments(app, argc, argv); status >= 0) return status;
+    if (deviation->count()) exportOptions.maxDeviation = maxDeviation;
+    if (tolerance->count()) importOptions.tolerance = importTolerance;
+    if (linear->count()) importOptions.maxLinearError = maxLinearError;
+    if (fov->count()) importOptions.fieldOfView = fieldOfView;
+    if (ortho->count()) importOptions.orthoWidth = orthoWidth;
+    if (mips->count() && mipLevels != 0) importOptions.mipLevels = mipLevels;  // 0: the full pyramid
 
     std::string inputName = input, inputPath = input, current = input;
     try {

@@ -4,25 +4,27 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
 #include "dsm/map_info.h"
 #include "dsm/scene.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct DepthMapOptions {
-    /// Depth map size; 0 keeps the scene light's resolution. To compare with a
+    /// Depth map size, each >= 1; unset keeps the scene light's resolution. To compare with a
     /// deep shadow map of R x R pixels and N samples per pixel "with the same
     /// number of depth samples", use R * sqrt(N) on each side.
-    std::uint32_t width = 0;
-    std::uint32_t height = 0;
+    std::optional<std::uint32_t> width;
+    std::optional<std::uint32_t> height;
     /// Jitter each sample inside its pixel (otherwise pixel centres).
     bool jitter = true;
     std::uint64_t seed = 1;
-    /// Worker threads; 0 = all cores. The map does not depend on it.
-    unsigned threads = 0;
+    /// Worker threads, >= 1; unset uses all cores. The map does not depend on it.
+    std::optional<unsigned> threads;
 };
 
 /// One depth per pixel: the nearest surface its sample ray meets, whatever
@@ -34,7 +36,11 @@ struct DepthMapOptions {
 /// The sample rays are the deep map's: the same light camera (lightCamera()),
 /// the same parametrisation by light depth, one stratified shutter time per
 /// pixel.
-class DepthShadowMap {
+///
+/// Thread safety: render() may run on several threads at once (each call
+/// parallelises internally); a finished map is immutable and its const members
+/// may be called from any number of threads.
+class DSM_API DepthShadowMap {
 public:
     /// Renders the scene's surfaces from its light. Throws dsm::Error for an
     /// empty size.
@@ -76,4 +82,4 @@ private:
     std::vector<float> depth_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

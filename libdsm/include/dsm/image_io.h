@@ -5,13 +5,14 @@
 #include <string>
 
 #include "dsm/map_images.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// True when the format chosen by `path`'s extension keeps 32-bit floats
 /// (OpenEXR, TIFF); false for 8-bit formats (PNG, JPEG, BMP, ...). Throws
 /// dsm::Error naming the file when OpenImageIO knows no format for it.
-bool imageFormatKeepsFloats(const std::string& path);
+DSM_API bool imageFormatKeepsFloats(const std::string& path);
 
 /// Writes `image` (1 to 4 channels) to `path`, the format chosen by the
 /// extension. Float formats store the values exactly as 32-bit floats. Other
@@ -20,11 +21,11 @@ bool imageFormatKeepsFloats(const std::string& path);
 /// temporary file beside `path` and renamed over it, so `path` is never left
 /// half written. Throws dsm::Error naming the file when the format is unknown,
 /// the image is empty or malformed, or the file cannot be written.
-void writeImage(const std::string& path, const FloatImage& image);
+DSM_API void writeImage(const std::string& path, const FloatImage& image);
 
 /// Reads a whole picture (the first subimage, level 0) as floats: 8- and
 /// 16-bit integer channels become value / 255 (or / 65535). Throws dsm::Error
 /// naming the file when it cannot be read.
-FloatImage readImage(const std::string& path);
+DSM_API FloatImage readImage(const std::string& path);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

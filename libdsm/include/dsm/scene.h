@@ -10,10 +10,10 @@
 #include <vector>
 
 #include "dsm/map_info.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
-using Vec3 = std::array<double, 3>;
 using Rgb = std::array<float, 3>;
 
 /// The light as a camera. A spot light is a perspective camera at `position`
@@ -139,21 +139,21 @@ struct HairBallParameters {
     std::uint32_t segments = 8;
     std::uint32_t seed = 1;
 };
-Curves generateHairBall(const HairBallParameters& parameters);
+DSM_API Curves generateHairBall(const HairBallParameters& parameters);
 
 /// Reads Cem Yuksel's binary .hair format (header "HAIR", points, optional
 /// segments, thickness). Throws dsm::Error naming the file on bad input.
-Curves loadHairFile(const std::string& path);
+DSM_API Curves loadHairFile(const std::string& path);
 
 /// Reads a scene file (spec/scene.md). Relative file names inside (OBJ, .hair,
 /// .vdb) are relative to the scene file. Throws dsm::Error naming the file, the
 /// JSON path (e.g. "/objects/2/opacity") and what was expected.
-Scene loadScene(const std::string& path);
+DSM_API Scene loadScene(const std::string& path);
 /// Parses scene JSON text; `baseDirectory` resolves relative file names and
 /// `name` is used in messages.
-Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name);
+DSM_API Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name);
 
 /// The light camera of a scene's light (with the area-light push-back).
-LightCamera lightCamera(const LightDescription& light);
+DSM_API LightCamera lightCamera(const LightDescription& light);
 
-}  // namespace dsm
+DSM_NAMESPACE_END
