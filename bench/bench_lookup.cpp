@@ -230,7 +230,6 @@ BuiltMap build(const Scene& scene, std::uint32_t size, std::uint32_t spp, const 
     o.filterWidth = cfg.buildWidth;
     o.width = o.height = size;
     o.samplesPerPixel = spp;
-    o.threads = 0;
     m.stats = buildMap(scene, o, m.path);
     const auto map = DeepShadowMap::open(m.path, ReaderOptions{.cache = TileCache::create(std::size_t(1) << 30)});
     m.info = map->info();
@@ -394,11 +393,12 @@ inline double directBilinear(const Inputs& in, const Query& q) {
 
 // ---------------------------------------------------------------- benchmarks
 
+/// A box lookup; `level` < 0 chooses the levels from the width.
 LookupOptions boxOptions(double width, int level) {
     LookupOptions o;
     o.filter = PixelFilter::Box;
     o.filterWidth = width;
-    o.level = level;
+    if (level >= 0) o.level = static_cast<unsigned>(level);
     return o;
 }
 

@@ -201,7 +201,7 @@ TEST_F(CApi, LookupsEqualTheCppLookupsBitForBit) {
                 dsm::LookupOptions co;
                 co.filter = static_cast<dsm::PixelFilter>(filter);
                 co.filterWidth = o.filter_width;
-                co.level = level;
+                if (level != DSM_LEVEL_AUTO) co.level = static_cast<unsigned>(level);
                 co.bias = o.bias;
                 for (std::size_t i = 0; i < n; ++i) {
                     const std::array<double, 3> q{p[3 * i], p[3 * i + 1], p[3 * i + 2]};

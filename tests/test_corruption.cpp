@@ -130,7 +130,7 @@ void writeSampleMap(const std::string& path) {
     o.channels = 3;
     o.counts = true;
     o.maxLayers = 2;
-    o.mipLevels = 0;  // the full pyramid: 10x7, 5x4, 3x2, 2x1, 1x1
+    o.mipLevels.reset();  // the full pyramid: 10x7, 5x4, 3x2, 2x1, 1x1
     o.tolerance = 0.02;
     o.levelToleranceFactor = 2.0;  // coarse levels keep few vertices: a small file
     o.zlibLevel = 6;

@@ -13,6 +13,7 @@
 #include <filesystem>
 #include <functional>
 #include <limits>
+#include <optional>
 #include <random>
 #include <ostream>
 #include <string>
@@ -44,7 +45,7 @@ struct RoundTripCase {
     bool counts = false;
     int maxLayers = 1;
     int zlibLevel = 6;
-    unsigned mipLevels = 0;
+    std::optional<unsigned> mipLevels;  // unset: the full pyramid
     double tolerance = 0.01;
     PixelMaker pixel;
 };
@@ -152,7 +153,7 @@ void checkRoundTrip(const std::filesystem::path& path, const WriterOptions& opti
     EXPECT_EQ(map->path(), path.string());
 
     const unsigned full = dsm::fullLevelCount(image.width, image.height);
-    const unsigned expectedLevels = options.mipLevels == 0 ? full : std::min(options.mipLevels, full);
+    const unsigned expectedLevels = std::min(options.mipLevels.value_or(full), full);
     ASSERT_EQ(info.levels.size(), expectedLevels);
 
     // Tolerances halve (times the factor), error bounds add up (spec section 5).

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <memory>
 #include <numeric>
+#include <optional>
 #include <random>
 #include <string>
 #include <thread>
@@ -133,14 +134,20 @@ struct Reference {
     double blend = 0.0;
 };
 
+/// A test's level: negative for automatic.
+std::optional<unsigned> levelOption(int level) {
+    if (level < 0) return std::nullopt;
+    return static_cast<unsigned>(level);
+}
+
 Reference referenceLookup(const DeepShadowMap& map, const LookupOptions& o, double rx, double ry, double z) {
     const auto& levels = map.info().levels;
     const unsigned coarsest = static_cast<unsigned>(levels.size() - 1);
     const double minW = minimumWidth(o.filter);
     const double width = std::max(o.filterWidth, minW);
     Reference r;
-    if (o.level >= 0) {
-        r.level0 = r.level1 = std::min(static_cast<unsigned>(o.level), coarsest);
+    if (o.level) {
+        r.level0 = r.level1 = std::min(*o.level, coarsest);
     } else {
         const double lambda = std::max(0.0, std::log2(width / minW));
         r.level0 = std::min(static_cast<unsigned>(std::floor(lambda)), coarsest);
@@ -229,7 +236,8 @@ void expectMatches(const LookupResult& got, const std::array<double, 3>& want, i
 
 std::string describe(const LookupOptions& o, double rx, double ry, double z) {
     return "filter " + std::to_string(int(o.filter)) + " width " + std::to_string(o.filterWidth) + " level " +
-           std::to_string(o.level) + " at " + std::to_string(rx) + "," + std::to_string(ry) + " z " + std::to_string(z);
+           (o.level ? std::to_string(*o.level) : std::string("auto")) + " at " + std::to_string(rx) + "," +
+           std::to_string(ry) + " z " + std::to_string(z);
 }
 
 // Query points: random inside, the corners and edges, pixel centres and borders.
@@ -354,7 +362,7 @@ TEST(LookupLevels, ForcedAndAutomaticLevelsFollowTheDocumentedSelection) {
                     LookupOptions o;
                     o.filter = filter;
                     o.filterWidth = w;
-                    o.level = level;
+                    o.level = levelOption(level);
                     const Reference want = referenceLookup(*m->map, o, rx, ry, z);
                     const LookupResult got = ctx.raster(rx, ry, z, o);
                     const std::string where = describe(o, rx, ry, z);
@@ -389,7 +397,7 @@ TEST(LookupLevels, ErrorBoundNamesTheLevelsUsed) {
     }
     o.level = 100;
     EXPECT_EQ(ctx.raster(20.3, 17.9, 2.0, o).errorBound, levels.back().errorBound);
-    o.level = -1;
+    o.level = std::nullopt;
     for (PixelFilter f : {PixelFilter::Box, PixelFilter::Triangle, PixelFilter::Gaussian}) {
         o.filter = f;
         const double minW = minimumWidth(f);
@@ -507,7 +515,7 @@ TEST(LookupSpace, PointsOutsideTheMapAreLit) {
                     LookupOptions o;
                     o.filter = f;
                     o.filterWidth = w;
-                    o.level = level;
+                    o.level = levelOption(level);
                     const LookupResult r = ctx.raster(rx, ry, 100.0, o);
                     const std::string where = describe(o, rx, ry, 100.0);
                     EXPECT_EQ(r.v, (std::array<double, 3>{1.0, 1.0, 1.0})) << where;
@@ -709,7 +717,7 @@ std::vector<Query> randomQueries(std::uint32_t w, std::uint32_t h, int n, std::u
         x.z = uz(rng);
         x.options.filter = static_cast<PixelFilter>(filter(rng));
         x.options.filterWidth = uw(rng);
-        x.options.level = std::max(-1, level(rng));
+        x.options.level = levelOption(level(rng));
         x.options.bias = 0.01 * static_cast<double>(filter(rng));
     }
     return q;

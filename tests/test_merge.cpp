@@ -287,6 +287,28 @@ TEST(MergeProduct, TimesAMapOfOnesKeepsTheValues) {
     EXPECT_NO_THROW(validate((dir / "out.dsm").string()));
 }
 
+TEST(MergeProduct, GivenOptionsOutOfRangeAreRefused) {
+    TempDir dir;
+    std::mt19937_64 rng(5);
+    writeMap(dir / "a.dsm", smallMapOptions(1, false),
+             makeImage(8, 8, [&](std::uint32_t, std::uint32_t) { return randomFunction(rng, 1, false, 1, 3); }));
+    const std::vector<std::string> inputs{(dir / "a.dsm").string()};
+    const std::string out = (dir / "out.dsm").string();
+    MergeOptions options;
+    options.zlibLevel = -1;  // unset is automatic; a given level must be 0..9
+    EXPECT_NE(messageOf(inputs, out, options).find("zlib level -1 is not in [0, 9]"), std::string::npos);
+    options.zlibLevel.reset();
+    options.tolerance = -1.0;
+    EXPECT_NE(messageOf(inputs, out, options).find("tolerance -1 is not a finite value >= 0"), std::string::npos);
+    options.tolerance.reset();
+    options.maxInterpolationError = 0.0;
+    EXPECT_NE(messageOf(inputs, out, options).find("interpolation error 0 is not a finite value > 0"),
+              std::string::npos);
+    EXPECT_FALSE(std::filesystem::exists(out));
+    options.maxInterpolationError.reset();
+    EXPECT_EQ(messageOf(inputs, out, options), "(no error)");
+}
+
 TEST(MergeProduct, MismatchedMapsNameTheFieldBothValuesAndBothFiles) {
     TempDir dir;
     std::mt19937_64 rng(9);

@@ -119,7 +119,7 @@ WriterOptions optionsFor(const MipCase& c) {
     o.maxLayers = c.maxLayers;
     o.tolerance = c.tolerance;
     o.levelToleranceFactor = c.factor;
-    o.mipLevels = 0;  // full pyramid
+    o.mipLevels.reset();  // full pyramid
     return o;
 }
 

@@ -569,6 +569,7 @@ TEST_F(SoftShadow, BadOptionsAndMismatchedLightsAreErrors) {
     };
     EXPECT_THROW(context.visibility(p, with([](auto& o) { o.samples = 0; })), dsm::Error);
     EXPECT_THROW(context.visibility(p, with([](auto& o) { o.layers = -1; })), dsm::Error);
+    EXPECT_THROW(context.visibility(p, with([](auto& o) { o.layers = 0; })), dsm::Error);  // unset means all
     EXPECT_THROW(context.visibility(p, with([](auto& o) { o.bias = -1.0; })), dsm::Error);
     EXPECT_THROW(context.visibility(p, with([](auto& o) { o.zThreshold = NAN; })), dsm::Error);
     EXPECT_THROW(context.visibility(p, with([](auto& o) { o.visibilityThreshold = 2.0; })), dsm::Error);

@@ -18,10 +18,12 @@
 #include <thread>
 #include <vector>
 
+#include "impl_access.h"
 #include "tile_cache_impl.h"
 
 namespace {
 
+using dsm::ImplAccess;
 using dsm::LoadedTile;
 using dsm::TileCache;
 using dsm::TileCacheStats;
@@ -62,7 +64,7 @@ bool intact(const std::shared_ptr<const TestTile>& t, const TileKey& key) {
 }
 
 std::shared_ptr<const TestTile> get(TileCache& cache, const TileKey& key, std::size_t bytes, int* calls = nullptr) {
-    return cache.impl().get<TestTile>(key, loaderFor(key, bytes, calls));
+    return ImplAccess::of(cache).get<TestTile>(key, loaderFor(key, bytes, calls));
 }
 
 // The reference: a plain LRU list under the documented rule (drop least
@@ -98,7 +100,7 @@ private:
 
 TEST(TileCache, CountsHitsMissesAndBytesRead) {
     auto cache = TileCache::create(1 << 20);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     int calls = 0;
     const TileKey a{f, 0, 1}, b{f, 0, 2}, c{f, 1, 1};
 
@@ -122,16 +124,16 @@ TEST(TileCache, CountsHitsMissesAndBytesRead) {
     EXPECT_EQ(s.evictions, 0u);
 
     // The public and internal views agree.
-    const TileCacheStats t = cache->impl().stats();
+    const TileCacheStats t = ImplAccess::of(*cache).stats();
     EXPECT_EQ(t.hits, s.hits);
     EXPECT_EQ(t.bytesInUse, s.bytesInUse);
-    EXPECT_EQ(cache->budget(), cache->impl().budget());
+    EXPECT_EQ(cache->budget(), ImplAccess::of(*cache).budget());
 }
 
 TEST(TileCache, DistinguishesFileLevelAndTile) {
     auto cache = TileCache::create(1 << 20);
-    const std::uint64_t f = cache->impl().newFileId();
-    const std::uint64_t g = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
+    const std::uint64_t g = ImplAccess::of(*cache).newFileId();
     EXPECT_NE(f, g);
     const TileKey keys[] = {{f, 0, 0}, {f, 0, 1}, {f, 1, 0}, {g, 0, 0}, {f, 1, 1}, {g, 1, 0}};
     for (const TileKey& k : keys) EXPECT_TRUE(intact(get(*cache, k, 100), k));
@@ -142,7 +144,7 @@ TEST(TileCache, DistinguishesFileLevelAndTile) {
 
 TEST(TileCache, EvictsLeastRecentlyUsedFirst) {
     auto cache = TileCache::create(30);  // three tiles of 10 bytes
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     const TileKey a{f, 0, 0}, b{f, 0, 1}, c{f, 0, 2}, d{f, 0, 3};
     get(*cache, a, 10);
     get(*cache, b, 10);
@@ -171,7 +173,7 @@ TEST(TileCache, EvictsLeastRecentlyUsedFirst) {
 
 TEST(TileCache, EvictsSeveralSmallTilesForOneLarge) {
     auto cache = TileCache::create(100);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     for (std::uint32_t i = 0; i < 10; ++i) get(*cache, {f, 0, i}, 10);
     EXPECT_EQ(cache->stats().bytesInUse, 100u);
     get(*cache, {f, 1, 0}, 35);  // needs four of the small tiles gone
@@ -191,7 +193,7 @@ TEST(TileCache, StaysWithinBudgetUnderRandomAccess) {
     const std::size_t sizes[] = {512, 4096, 16384, 1000};
     const std::uint64_t largest = 16384;
     auto cache = TileCache::create(budget);
-    const std::uint64_t files[] = {cache->impl().newFileId(), cache->impl().newFileId()};
+    const std::uint64_t files[] = {ImplAccess::of(*cache).newFileId(), ImplAccess::of(*cache).newFileId()};
 
     // A key space ten times the budget; each key has a fixed size.
     struct KeyAndSize {
@@ -242,7 +244,7 @@ TEST(TileCache, StaysWithinBudgetUnderRandomAccess) {
 
 TEST(TileCache, TileHeldByCallerSurvivesEviction) {
     auto cache = TileCache::create(1000);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     const TileKey a{f, 0, 0};
     auto held = get(*cache, a, 800);
     std::weak_ptr<const TestTile> weak = held;
@@ -260,7 +262,7 @@ TEST(TileCache, TileHeldByCallerSurvivesEviction) {
 
 TEST(TileCache, TileLargerThanBudgetIsReturnedAndCachedAlone) {
     auto cache = TileCache::create(100);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     get(*cache, {f, 0, 0}, 40);
     get(*cache, {f, 0, 1}, 40);
     const TileKey big{f, 1, 0};
@@ -282,7 +284,7 @@ TEST(TileCache, TileLargerThanBudgetIsReturnedAndCachedAlone) {
 
 TEST(TileCache, ZeroBudgetKeepsOnlyTheLastTile) {
     auto cache = TileCache::create(0);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     int calls = 0;
     for (std::uint32_t i = 0; i < 5; ++i) {
         const TileKey k{f, 0, i};
@@ -298,12 +300,12 @@ TEST(TileCache, ZeroBudgetKeepsOnlyTheLastTile) {
 
 TEST(TileCache, LoaderExceptionPropagatesAndCachesNothing) {
     auto cache = TileCache::create(1000);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     const TileKey k{f, 2, 7};
     get(*cache, {f, 0, 0}, 100);
     const auto failing = []() -> LoadedTile { throw dsm::Error(dsm::ErrorCode::corrupt, "bad tile"); };
-    EXPECT_THROW(cache->impl().get<TestTile>(k, failing), dsm::Error);
-    EXPECT_THROW(cache->impl().get<TestTile>(k, [] () -> LoadedTile { throw std::runtime_error("io"); }),
+    EXPECT_THROW(ImplAccess::of(*cache).get<TestTile>(k, failing), dsm::Error);
+    EXPECT_THROW(ImplAccess::of(*cache).get<TestTile>(k, [] () -> LoadedTile { throw std::runtime_error("io"); }),
                  std::runtime_error);
     TileCacheStats s = cache->stats();
     EXPECT_EQ(s.tilesRead, 1u);
@@ -324,15 +326,15 @@ TEST(TileCache, LoaderExceptionPropagatesAndCachesNothing) {
 
 TEST(TileCache, LoaderReturningNoDataIsAnError) {
     auto cache = TileCache::create(1000);
-    const TileKey k{cache->impl().newFileId(), 0, 0};
-    EXPECT_THROW(cache->impl().get<TestTile>(k, [] { return LoadedTile{nullptr, 10, 10}; }), dsm::Error);
+    const TileKey k{ImplAccess::of(*cache).newFileId(), 0, 0};
+    EXPECT_THROW(ImplAccess::of(*cache).get<TestTile>(k, [] { return LoadedTile{nullptr, 10, 10}; }), dsm::Error);
     EXPECT_EQ(cache->stats().tilesInUse, 0u);
     EXPECT_EQ(cache->stats().tilesRead, 0u);
 }
 
 TEST(TileCache, LoaderRunsWithoutTheLockAndFirstFinishedLoadIsKept) {
     auto cache = TileCache::create(1000);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     const TileKey k{f, 0, 0};
     std::shared_ptr<const TestTile> inner;
     // The outer loader calls back into the cache (it would deadlock were a lock
@@ -343,7 +345,7 @@ TEST(TileCache, LoaderRunsWithoutTheLockAndFirstFinishedLoadIsKept) {
         inner = get(*cache, k, 100);
         return loaderFor(k, 100)();
     };
-    auto got = cache->impl().get<TestTile>(k, outer);
+    auto got = ImplAccess::of(*cache).get<TestTile>(k, outer);
     ASSERT_TRUE(inner);
     EXPECT_EQ(got.get(), inner.get());
     EXPECT_TRUE(intact(got, k));
@@ -359,14 +361,14 @@ TEST(TileCache, LoaderRunsWithoutTheLockAndFirstFinishedLoadIsKept) {
 
 TEST(TileCache, ForgetFileDropsOnlyThatFile) {
     auto cache = TileCache::create(1 << 20);
-    const std::uint64_t f = cache->impl().newFileId();
-    const std::uint64_t g = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
+    const std::uint64_t g = ImplAccess::of(*cache).newFileId();
     for (std::uint32_t i = 0; i < 4; ++i) {
         get(*cache, {f, i % 2, i}, 100);
         get(*cache, {g, i % 2, i}, 30);
     }
     auto held = get(*cache, {f, 0, 0}, 100);
-    cache->impl().forgetFile(f);
+    ImplAccess::of(*cache).forgetFile(f);
     TileCacheStats s = cache->stats();
     EXPECT_EQ(s.tilesInUse, 4u);
     EXPECT_EQ(s.bytesInUse, 120u);
@@ -378,13 +380,13 @@ TEST(TileCache, ForgetFileDropsOnlyThatFile) {
     EXPECT_EQ(calls, 0);
     for (std::uint32_t i = 0; i < 4; ++i) get(*cache, {f, i % 2, i}, 100, &calls);
     EXPECT_EQ(calls, 4);
-    cache->impl().forgetFile(12345678);  // unknown file: nothing happens
+    ImplAccess::of(*cache).forgetFile(12345678);  // unknown file: nothing happens
     EXPECT_EQ(cache->stats().tilesInUse, 8u);
 }
 
 TEST(TileCache, ClearDropsEverything) {
     auto cache = TileCache::create(1 << 20);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     for (std::uint32_t i = 0; i < 10; ++i) get(*cache, {f, 0, i}, 100);
     auto held = get(*cache, {f, 0, 3}, 100);
     cache->clear();
@@ -402,7 +404,7 @@ TEST(TileCache, ClearDropsEverything) {
 
 TEST(TileCache, SetBudgetShrinkingEvictsAtOnce) {
     auto cache = TileCache::create(100);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     for (std::uint32_t i = 0; i < 5; ++i) get(*cache, {f, 0, i}, 20);
     get(*cache, {f, 0, 0}, 20);  // 0 becomes the most recent
     cache->setBudget(45);
@@ -427,7 +429,7 @@ TEST(TileCache, SetBudgetShrinkingEvictsAtOnce) {
 
 TEST(TileCache, ResetStatsZeroesCountersAndRestartsPeak) {
     auto cache = TileCache::create(100);
-    const std::uint64_t f = cache->impl().newFileId();
+    const std::uint64_t f = ImplAccess::of(*cache).newFileId();
     for (std::uint32_t i = 0; i < 8; ++i) get(*cache, {f, 0, i}, 30);
     get(*cache, {f, 0, 7}, 30);
     cache->setBudget(50);
@@ -463,7 +465,8 @@ TEST(TileCache, ConcurrentGetsAreConsistent) {
     const std::uint64_t budget = 32 * 1024;
     const std::uint64_t largest = 8192;
     auto cache = TileCache::create(budget);
-    const std::uint64_t files[] = {cache->impl().newFileId(), cache->impl().newFileId(), cache->impl().newFileId()};
+    auto& inside = ImplAccess::of(*cache);
+    const std::uint64_t files[] = {inside.newFileId(), inside.newFileId(), inside.newFileId()};
 
     std::atomic<std::uint64_t> loads{0}, loadedFileBytes{0}, failures{0}, bad{0}, overBudget{0};
     const auto sizeOf = [&](const TileKey& k) -> std::size_t { return (k.tile % 3 == 0) ? largest : 1024; };
@@ -474,7 +477,7 @@ TEST(TileCache, ConcurrentGetsAreConsistent) {
             const bool fails = (k.level == 1 && k.tile % 11 == 5);
             const std::size_t bytes = sizeOf(k);
             try {
-                auto t = cache->impl().get<TestTile>(k, [&, k, bytes, fails]() {
+                auto t = ImplAccess::of(*cache).get<TestTile>(k, [&, k, bytes, fails]() {
                     if (fails) throw dsm::Error(dsm::ErrorCode::corrupt, "unreadable tile");
                     LoadedTile lt = loaderFor(k, bytes)();
                     ++loads;
@@ -488,7 +491,7 @@ TEST(TileCache, ConcurrentGetsAreConsistent) {
             if (r % 16 == 0 && cache->stats().bytesInUse > budget + largest) ++overBudget;
             // One thread also changes the budget and drops tiles now and then.
             if (id == 0 && r % 500 == 250) cache->setBudget(r % 1000 == 250 ? budget / 2 : budget);
-            if (id == 1 && r % 1000 == 999) cache->impl().forgetFile(files[2]);
+            if (id == 1 && r % 1000 == 999) ImplAccess::of(*cache).forgetFile(files[2]);
             if (id == 2 && r % 1500 == 1499) cache->clear();
         }
     };

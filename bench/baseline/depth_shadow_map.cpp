@@ -23,8 +23,8 @@ using detail::concat;
 
 DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions& options) {
     DepthShadowMap map;
-    map.width_ = options.width ? options.width : scene.light.width;
-    map.height_ = options.height ? options.height : scene.light.height;
+    map.width_ = options.width.value_or(scene.light.width);
+    map.height_ = options.height.value_or(scene.light.height);
     if (map.width_ == 0 || map.height_ == 0 || map.width_ > (1u << 17) || map.height_ > (1u << 17))
         throw Error(ErrorCode::argument,
                     concat("depth shadow map: size ", map.width_, "x", map.height_, " is empty or too large"));

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -13,11 +14,11 @@
 namespace dsm {
 
 struct DepthMapOptions {
-    /// Depth map size; 0 keeps the scene light's resolution. To compare with a
+    /// Depth map size, each >= 1; unset keeps the scene light's resolution. To compare with a
     /// deep shadow map of R x R pixels and N samples per pixel "with the same
     /// number of depth samples", use R * sqrt(N) on each side.
-    std::uint32_t width = 0;
-    std::uint32_t height = 0;
+    std::optional<std::uint32_t> width;
+    std::optional<std::uint32_t> height;
     /// Jitter each sample inside its pixel (otherwise pixel centres).
     bool jitter = true;
     std::uint64_t seed = 1;
@@ -35,6 +36,10 @@ struct DepthMapOptions {
 /// The sample rays are the deep map's: the same light camera (lightCamera()),
 /// the same parametrisation by light depth, one stratified shutter time per
 /// pixel.
+///
+/// Thread safety: render() may run on several threads at once (each call
+/// parallelises internally); a finished map is immutable and its const members
+/// may be called from any number of threads.
 class DepthShadowMap {
 public:
     /// Renders the scene's surfaces from its light. Throws dsm::Error for an

@@ -364,7 +364,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
             knobs.push_back({{"knob", knob},
                              {"value", value},
                              {"samples", o.samples},
-                             {"layers", o.layers},
+                             {"layers", o.layers.value_or(0)},  // 0: all of the map's layers
                              {"bias", o.bias},
                              {"mtsm_seconds", mtsm.seconds},
                              {"reference_seconds", ref.seconds},

@@ -14,7 +14,7 @@ Json studyCacheBudget(const Config& config, const Scene& scene, const std::strin
     o.width = o.height = config.cacheResolution;
     o.samplesPerPixel = 16;
     o.tileSize = config.cacheTileSize;
-    o.threads = config.threads;
+    if (config.threads != 0) o.threads = config.threads;  // 0: all cores
     buildMap(scene, o, path.string());
 
     // Decoded bytes of every tile of every level: a budget of 100% holds the map.

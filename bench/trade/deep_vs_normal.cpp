@@ -73,7 +73,7 @@ Json studyDeepVersusNormal(const Config& config, const Scene& scene, const std::
 
         DepthMapOptions depthOptions;
         depthOptions.width = depthOptions.height = config.resolution * side;
-        depthOptions.threads = config.threads;
+        if (config.threads != 0) depthOptions.threads = config.threads;  // 0: all cores
         DepthShadowMap depth;
         const double depthSeconds = timed([&] { depth = DepthShadowMap::render(scene, depthOptions); });
         const std::uint64_t exrBytes = depth.writeExr((config.workDir / (name + "-depth.exr")).string());
@@ -90,7 +90,7 @@ Json studyDeepVersusNormal(const Config& config, const Scene& scene, const std::
                    {"seconds_per_lookup", secondsPerLookup(deep, queries, pixel)},
                    {"error", toJson(compare(deepValues, truth))}}},
                  {"normal",
-                  {{"resolution", depthOptions.width},
+                  {{"resolution", *depthOptions.width},
                    {"bytes", depth.bytes()},
                    {"exr_bytes", exrBytes},
                    {"render_seconds", depthSeconds},
@@ -100,7 +100,7 @@ Json studyDeepVersusNormal(const Config& config, const Scene& scene, const std::
                    {"sampled_error", toJson(compare(sampledValues, truth))}}}};
         std::printf("  %s: N=%4u deep %8llu B  err %.4f | normal %4u^2 %9llu B  err %.4f  (sampled %.4f)\n",
                     name.c_str(), n, static_cast<unsigned long long>(deep->info().fileBytes),
-                    row["deep"]["error"]["max"].get<double>(), depthOptions.width,
+                    row["deep"]["error"]["max"].get<double>(), *depthOptions.width,
                     static_cast<unsigned long long>(depth.bytes()), row["normal"]["error"]["max"].get<double>(),
                     row["normal"]["sampled_error"]["max"].get<double>());
         std::fflush(stdout);
@@ -122,7 +122,7 @@ Json studyFilterWidth(const Config& config, const Scene& scene, const std::strin
     const auto deep = DeepShadowMap::open(gridMapPath(config, name, n, 1.0).string());
     DepthMapOptions depthOptions;
     depthOptions.width = depthOptions.height = config.resolution * side;
-    depthOptions.threads = config.threads;
+    if (config.threads != 0) depthOptions.threads = config.threads;  // 0: all cores
     const DepthShadowMap depth = DepthShadowMap::render(scene, depthOptions);
     const std::vector<Query> queries = makeQueries(*deep, config.queries, false, 31);
     // The exact PCF reads every depth pixel of the footprint: keep its query
@@ -131,7 +131,7 @@ Json studyFilterWidth(const Config& config, const Scene& scene, const std::strin
     out["scene"] = name;
     out["spp"] = n;
     out["deep_resolution"] = config.resolution;
-    out["normal_resolution"] = depthOptions.width;
+    out["normal_resolution"] = *depthOptions.width;
     Json rows = Json::array();
     for (double width = 1.0; width <= config.resolution / 2.0; width *= 2.0) {
         LookupOptions mipmapped;

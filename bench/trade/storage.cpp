@@ -108,7 +108,7 @@ Json studyStorage(const Config& config, const Scene& scene, const std::string& n
     BuildOptions o;
     o.width = o.height = resolution;
     o.samplesPerPixel = spp;
-    o.threads = config.threads;
+    if (config.threads != 0) o.threads = config.threads;  // 0: all cores
     o.sampleRays = [&](std::uint32_t x, std::uint32_t y, std::span<const SampleRay> rays) {
         std::vector<DeepSample> samples;
         const float share = 1.0f / static_cast<float>(rays.size());

@@ -16,7 +16,7 @@ BuildStats buildWith(const Scene& scene, std::uint32_t resolution, std::uint32_t
     o.filterWidth = 1.0;
     o.tileSize = tileSize;
     o.seed = seed;
-    o.threads = threads;
+    if (threads != 0) o.threads = threads;  // 0: all cores
     return buildMap(scene, o, path);
 }
 

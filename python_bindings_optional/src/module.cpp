@@ -10,6 +10,7 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -49,15 +50,15 @@ dsm::PixelFilter parseFilter(const std::string& name) {
     throw py::value_error("filter must be 'box', 'triangle' or 'gaussian', not '" + name + "'");
 }
 
-/// "auto" -> -1, an integer >= 0 -> itself.
-int parseLevel(const py::object& level) {
+/// "auto" -> nothing (automatic), an integer >= 0 -> itself.
+std::optional<unsigned> parseLevel(const py::object& level) {
     if (py::isinstance<py::str>(level)) {
-        if (level.cast<std::string>() == "auto") return -1;
+        if (level.cast<std::string>() == "auto") return std::nullopt;
         throw py::value_error("level must be 'auto' or an integer >= 0");
     }
     const long value = level.cast<long>();
     if (value < 0) throw py::value_error("level must be 'auto' or an integer >= 0");
-    return static_cast<int>(std::min<long>(value, 1 << 20));
+    return static_cast<unsigned>(std::min<long>(value, 1 << 20));
 }
 
 using PointArray = py::array_t<double, py::array::c_style | py::array::forcecast>;
@@ -228,7 +229,7 @@ public:
         const dsm::AreaLight area = parseLight(light);
         dsm::SoftShadowOptions options;
         options.samples = samples;
-        options.layers = layers;
+        if (layers != 0) options.layers = layers;  // 0: all of the map's layers
         options.bias = bias;
         options.zThreshold = zThreshold;
         options.seed = seed;
@@ -300,15 +301,22 @@ dsm::BuildOptions buildOptions(const py::dict& kwargs) {
                 o.height = wh[1];
             }
         } else if (key == "spp") o.samplesPerPixel = value.cast<std::uint32_t>();
-        else if (key == "tolerance") o.tolerance = py::isinstance<py::str>(value) ? -1.0 : value.cast<double>();
+        else if (key == "tolerance") {
+            if (!py::isinstance<py::str>(value)) o.tolerance = value.cast<double>();  // a string: "auto"
+        }
         else if (key == "filter") o.filter = parseFilter(value.cast<std::string>());
         else if (key == "filter_width") o.filterWidth = value.cast<double>();
-        else if (key == "mip_levels") o.mipLevels = py::isinstance<py::str>(value) ? 0u : value.cast<unsigned>();
+        else if (key == "mip_levels") {
+            // "auto" or 0: the full pyramid.
+            if (!py::isinstance<py::str>(value) && value.cast<unsigned>() != 0) o.mipLevels = value.cast<unsigned>();
+        }
         else if (key == "tile_size") o.tileSize = value.cast<std::uint32_t>();
         else if (key == "mtsm_layers") o.mtsmLayers = value.cast<int>();
         else if (key == "counts") o.counts = value.cast<bool>();
         else if (key == "region") o.region = value.cast<std::array<std::uint32_t, 4>>();
-        else if (key == "threads") o.threads = value.cast<unsigned>();
+        else if (key == "threads") {
+            if (value.cast<unsigned>() != 0) o.threads = value.cast<unsigned>();  // 0: all cores
+        }
         else if (key == "seed") o.seed = value.cast<std::uint64_t>();
         else if (key == "zlib_level") o.zlibLevel = value.cast<int>();
         else throw py::type_error("build() got an unexpected option '" + key + "'");

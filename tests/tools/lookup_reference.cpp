@@ -81,7 +81,7 @@ void printAnswers(const std::vector<std::string>& args) {
     dsm::LookupOptions options;
     options.filter = filterNamed(args[2]);
     options.filterWidth = std::stod(args[3]);
-    options.level = std::stoi(args[4]);
+    if (const int level = std::stoi(args[4]); level >= 0) options.level = static_cast<unsigned>(level);
     options.bias = std::stod(args[5]);
     dsm::LookupContext context(map);
     std::array<double, 3> p{};
@@ -110,7 +110,7 @@ void printSoftAnswers(const std::vector<std::string>& args) {
     if (!pcf && args[5] != "mtsm") throw std::runtime_error("unknown method '" + args[5] + "'");
     dsm::SoftShadowOptions options;
     options.samples = std::stoi(args[6]);
-    options.layers = std::stoi(args[7]);
+    if (const int layers = std::stoi(args[7]); layers != 0) options.layers = layers;
     options.zThreshold = std::stod(args[8]);
     options.bias = std::stod(args[9]);
     options.seed = std::stoull(args[10]);

@@ -130,6 +130,7 @@ int main(int argc, char** argv) {
     std::string scenePath, output, resolution, tolerance = "auto", filter = "gaussian", mipLevels = "auto", region;
     std::string statsJson;
     dsm::BuildOptions options;
+    unsigned threads = 0;
     bool quiet = false;
     app.add_option("scene", scenePath, "Scene description (JSON, see spec/scene.md); - reads stdin")->required();
     app.add_option("-o,--output", output, "Output .dsm file")->required();
@@ -155,7 +156,7 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_option("--region", region, "Build only pixels X0,Y0,X1,Y1 (half-open), for distributed builds");
-    app.add_option("-j,--threads", options.threads, "Worker threads (0 = all cores; more are clamped to the cores)")
+    app.add_option("-j,--threads", threads, "Worker threads (0 = all cores; more are clamped to the cores)")
         ->check(integerIn(0, UINT32_MAX))
         ->capture_default_str();
     app.add_option("--seed", options.seed, "Random seed, an integer in [0, 2^64 - 1]")
@@ -204,7 +205,7 @@ int main(int argc, char** argv) {
         }
         double value = 0.0;
         try {
-            options.tolerance = parseAutoOr(tolerance, value) ? value : -1.0;
+            if (parseAutoOr(tolerance, value)) options.tolerance = value;
             if (parseAutoOr(mipLevels, value)) {
                 if (!(value >= 1.0 && value <= kMaxMipLevels) || value != std::floor(value))
                     throw std::invalid_argument(mipLevels);
@@ -213,7 +214,7 @@ int main(int argc, char** argv) {
         } catch (const std::exception&) {
             throw std::invalid_argument("--tolerance and --mip-levels expect auto or a number");
         }
-        if (tolerance != "auto" && !(options.tolerance >= 0.0 && options.tolerance <= 1.0))
+        if (options.tolerance && !(*options.tolerance >= 0.0 && *options.tolerance <= 1.0))
             throw std::invalid_argument("--tolerance expects auto or a value in [0, 1], got '" + tolerance + "'");
         options.filter = *dsm::pixelFilterFromName(filter);  // CLI11 checked the name
         if (app.count("--region")) options.region = parseRegion(region);
@@ -238,7 +239,7 @@ int main(int argc, char** argv) {
             if (const auto* volume = std::get_if<dsm::Volume>(&object.geometry))
                 if (const auto* vdb = std::get_if<dsm::VdbDensity>(&volume->density)) volumeFiles.push_back(vdb->file);
         dsm::tools::checkOutputs(outputs, volumeFiles);
-        options.threads = dsm::tools::usableThreadsNoted("dsm-build", options.threads, quiet);
+        options.threads = dsm::tools::usableThreadsNoted("dsm-build", threads, quiet);
         if (!quiet) announceLargeBuild(dsm::estimateBuild(scene, options), options.samplesPerPixel);
         Progress progress(quiet);
         options.progress = [&](double f) { progress(f); };

@@ -61,7 +61,8 @@ int main(int argc, char** argv) {
                         ->type_name("N")
                         ->check(integerIn(1, 65536))
                         ->needs(tiled);
-    auto* deviation = app.add_option("--max-deviation", exportOptions.maxDeviation,
+    double maxDeviation = 0.0;
+    auto* deviation = app.add_option("--max-deviation", maxDeviation,
                                      ".dsm -> .exr: bound on |EXR transmittance - map visibility| from the "
                                      "exponential reading of volume samples, in [1e-6, 1] (default "
                                      "clamp(tolerance/2, 1e-5, 1e-3))")
@@ -69,12 +70,14 @@ int main(int argc, char** argv) {
                           ->check(finiteNumberIn(dsm::kMinExrErrorBound, 1.0));
 
     dsm::ExrImportOptions importOptions;
-    auto* tolerance = app.add_option("-e,--tolerance", importOptions.tolerance,
+    double importTolerance = 0.0, maxLinearError = 0.0, fieldOfView = 0.0, orthoWidth = 0.0;
+    unsigned mipLevels = 0;
+    auto* tolerance = app.add_option("-e,--tolerance", importTolerance,
                                      ".exr -> .dsm: compression tolerance (default: the file's dsm:tolerance, "
                                      "else 1/256), in [0, 1]")
                           ->type_name("E")
                           ->check(finiteNumberIn(0.0, 1.0));
-    auto* linear = app.add_option("--max-linear-error", importOptions.maxLinearError,
+    auto* linear = app.add_option("--max-linear-error", maxLinearError,
                                   ".exr -> .dsm: bound on the chords that replace exponential volume samples "
                                   "in [1e-6, 1] (default clamp(tolerance/4, 1e-5, 1e-3))")
                        ->type_name("D")
@@ -82,7 +85,7 @@ int main(int argc, char** argv) {
     std::string cameraFrom;
     auto* cameraMap = app.add_option("--camera-from", cameraFrom, ".exr -> .dsm: take the light camera of this map")
                           ->type_name("MAP.dsm");
-    auto* fov = app.add_option("--fov", importOptions.fieldOfView,
+    auto* fov = app.add_option("--fov", fieldOfView,
                                ".exr -> .dsm: perspective light of this horizontal field of view (degrees), placed "
                                "by the file's worldToCamera")
                     ->type_name("DEG")
@@ -98,7 +101,7 @@ int main(int argc, char** argv) {
                                                                     : std::string("expects degrees in (0, 180)");
                         },
                         "DEG", "in (0, 180)"));
-    auto* ortho = app.add_option("--ortho-width", importOptions.orthoWidth,
+    auto* ortho = app.add_option("--ortho-width", orthoWidth,
                                  ".exr -> .dsm: orthographic light with a window this wide (light units)")
                       ->type_name("W")
                       ->check(finiteNumberIn(0.0, kMaxLength, LowerBound::Exclusive));
@@ -106,7 +109,7 @@ int main(int argc, char** argv) {
                                    ".exr -> .dsm: map tile edge, a power of two 2..4096 (default 32)")
                         ->type_name("N")
                         ->check(integerIn(2, 4096));
-    auto* mips = app.add_option("-m,--mip-levels", importOptions.mipLevels,
+    auto* mips = app.add_option("-m,--mip-levels", mipLevels,
                                 ".exr -> .dsm: mip levels, 0 = full pyramid (default), 1 = none")
                      ->type_name("N")
                      ->check(integerIn(0, kMaxMipLevel + 1));
@@ -134,6 +137,12 @@ int main(int argc, char** argv) {
     app.footer("Exit status: 0 on success, 1 when a file cannot be read, converted or written, 2 on a usage "
                "error.\nDocumentation: docs/dsm-convert.md");
     if (const int status = dsm::tools::parseArguments(app, argc, argv); status >= 0) return status;
+    if (deviation->count()) exportOptions.maxDeviation = maxDeviation;
+    if (tolerance->count()) importOptions.tolerance = importTolerance;
+    if (linear->count()) importOptions.maxLinearError = maxLinearError;
+    if (fov->count()) importOptions.fieldOfView = fieldOfView;
+    if (ortho->count()) importOptions.orthoWidth = orthoWidth;
+    if (mips->count() && mipLevels != 0) importOptions.mipLevels = mipLevels;  // 0: the full pyramid
 
     std::string inputName = input == "-" ? "<stdin>" : input, inputPath = input, current = input;
     try {

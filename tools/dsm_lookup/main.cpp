@@ -404,14 +404,14 @@ Space spaceFromName(const std::string& name) {
     return Space::World;
 }
 
-/// -1 for "auto", else the level.
-int levelFromText(const std::string& text) {
-    if (text == "auto") return -1;
+/// Nothing for "auto", else the level.
+std::optional<unsigned> levelFromText(const std::string& text) {
+    if (text == "auto") return std::nullopt;
     int level = 0;
     const auto [end, error] = std::from_chars(text.data(), text.data() + text.size(), level);
     if (error != std::errc() || end != text.data() + text.size() || level < 0)
         throw UsageError("--level: expected auto or a level number >= 0, got " + quotedInput(text));
-    return level;
+    return static_cast<unsigned>(level);
 }
 
 std::string percent(std::uint64_t part, std::uint64_t whole) {
@@ -467,7 +467,7 @@ void checkSoftOptions(const CLI::App& app, const Options& o) {
             if (given(name)) throw UsageError(std::string(name) + " does not apply to --soft pcf");
 }
 
-int run(const Options& o, const std::vector<std::array<double, 3>>& points, int level) {
+int run(const Options& o, const std::vector<std::array<double, 3>>& points, std::optional<unsigned> level) {
     const bool queriesFromStdin = o.input == "-" || (o.input.empty() && points.empty());
     if (o.map == "-" && queriesFromStdin)
         throw UsageError("the map and the queries cannot both come from standard input");
@@ -529,7 +529,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, int 
         }
         dsm::SoftShadowOptions shadow;
         shadow.samples = o.lightSamples;
-        shadow.layers = o.layers;
+        if (o.layers != 0) shadow.layers = o.layers;
         shadow.zThreshold = o.zThreshold;
         shadow.bias = o.bias;
         shadow.seed = o.seed;
@@ -649,7 +649,7 @@ int main(int argc, char** argv) {
 
     if (const int status = parseArguments(app, argc, argv); status >= 0) return status;
 
-    int level = -1;
+    std::optional<unsigned> level;
     std::vector<std::array<double, 3>> points;
     try {
         if (!std::isfinite(o.bias)) throw UsageError("--bias: expected a finite number");

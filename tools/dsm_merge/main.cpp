@@ -36,8 +36,8 @@ int main(int argc, char** argv) {
     std::vector<std::string> inputs;
     std::string output;
     std::string mode = "product";
-    double tolerance = -1.0;
-    int zlibLevel = -1;
+    double tolerance = 0.0;
+    int zlibLevel = 6;
     bool quiet = false;
     app.add_option("inputs", inputs, "Input .dsm files")->required();
     app.add_option("-o,--output", output, "Output .dsm file (written atomically)")->required();
@@ -60,8 +60,8 @@ int main(int argc, char** argv) {
 
     dsm::MergeOptions options;
     options.mode = mode == "stitch" ? dsm::MergeMode::Stitch : dsm::MergeMode::Product;
-    options.tolerance = tolerance;
-    options.zlibLevel = zlibLevel;
+    if (app.count("--tolerance")) options.tolerance = tolerance;
+    if (app.count("--zlib-level")) options.zlibLevel = zlibLevel;
     std::vector<std::string> files = inputs;
     files.push_back(output);
     try {

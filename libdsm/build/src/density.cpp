@@ -20,7 +20,7 @@
 #include "splitmix64.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 namespace {
 
 /// A field that is 0 outside its closed box.
@@ -276,4 +276,4 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
 #endif
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -4,12 +4,13 @@
 #include <memory>
 
 #include "dsm/scene.h"
+#include "tested_internal.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// A scalar density field. Thread-safe: evaluate() may be called from many
 /// threads at once.
-class DensityField {
+class DSM_TESTED_INTERNAL DensityField {
 public:
     virtual ~DensityField() = default;
     /// Density at an object-space point; 0 outside the field.
@@ -19,7 +20,7 @@ public:
 /// The field of a volume (homogeneous, noise cloud or OpenVDB grid). Loads
 /// the VDB file if any; throws dsm::Error naming the file and grid on failure.
 /// The returned field is 0 outside [volume.boundsMin, volume.boundsMax].
-std::unique_ptr<DensityField> makeDensityField(const Volume& volume);
+DSM_TESTED_INTERNAL std::unique_ptr<DensityField> makeDensityField(const Volume& volume);
 
 /// The box where an OpenVDB grid's density can be non-zero, in the grid's world
 /// space (= the volume's object space): the bounding box of the active voxels,
@@ -27,6 +28,6 @@ std::unique_ptr<DensityField> makeDensityField(const Volume& volume);
 /// mapped from index to world space. Throws dsm::Error naming the file and
 /// grid when the file cannot be read, the grid is missing or not a float grid,
 /// or it has no active voxels.
-void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax);
+DSM_TESTED_INTERNAL void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -9,7 +9,7 @@
 #include "affine.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -516,4 +516,4 @@ void RayCaster::volumeSamples(const Vec3& origin, const Vec3& direction, double 
     }
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -10,8 +10,9 @@
 
 #include "density.h"
 #include "dsm/scene.h"
+#include "tested_internal.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct RaySurfaceHit {
     double t;
@@ -25,7 +26,7 @@ struct RayVolumeSample {
 
 /// World-space primitives of a scene under a bounding volume hierarchy.
 /// Immutable after construction and safe to use from many threads.
-class RayCaster {
+class DSM_TESTED_INTERNAL RayCaster {
 public:
     explicit RayCaster(const Scene& scene);
     ~RayCaster();
@@ -53,4 +54,4 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -26,7 +26,7 @@
 #include "ray_caster.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -70,8 +70,8 @@ struct TileStats {
 
 BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     BuildEstimate e;
-    e.width = options.width ? options.width : scene.light.width;
-    e.height = options.height ? options.height : scene.light.height;
+    e.width = options.width.value_or(scene.light.width);
+    e.height = options.height.value_or(scene.light.height);
     const auto& r = options.region;
     const bool whole = r == std::array<std::uint32_t, 4>{0, 0, 0, 0} || r[0] >= r[2] || r[1] >= r[3];
     e.pixels = whole ? std::uint64_t(e.width) * e.height : std::uint64_t(r[2] - r[0]) * (r[3] - r[1]);
@@ -89,7 +89,7 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     const std::uint64_t row = std::uint64_t(e.width) * tile * perPixel;
     const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * options.filterWidth - 0.5)));
     const std::uint64_t samplePixels = (tile + 2 * reach) * (tile + 2 * reach);
-    const std::uint64_t samples = std::uint64_t(usableThreads(options.threads)) * samplePixels *
+    const std::uint64_t samples = std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels *
                                   options.samplesPerPixel * (sizeof(SampleData) + 2 * sizeof(SurfaceHit));
     e.memoryBytes = directory + 2 * row + samples;
     return e;
@@ -98,12 +98,14 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
 BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
     const auto wallStart = Clock::now();
     LightDescription light = scene.light;
-    if (options.width) light.width = options.width;
-    if (options.height) light.height = options.height;
+    if (options.width) light.width = *options.width;
+    if (options.height) light.height = *options.height;
     const std::uint32_t W = light.width, H = light.height;
     const std::string where = concat("build '", path, "'");
     checkOutputPath(path);  // before the work, not after it
     if (W == 0 || H == 0) throw Error(ErrorCode::argument, concat(where, ": resolution ", W, "x", H, " is empty"));
+    if (options.threads && *options.threads < 1)
+        throw Error(ErrorCode::argument, concat(where, ": worker thread count 0 is not >= 1"));
     if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
         throw Error(ErrorCode::argument,
                     concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
@@ -123,9 +125,9 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     const int channels = scene.isColoured() ? 3 : 1;
     const bool counts = options.counts || options.mtsmLayers > 1;
     const std::uint32_t spp = options.samplesPerPixel;
-    const double tolerance = options.tolerance < 0.0 ? autoTolerance(spp) : options.tolerance;
-    if (!std::isfinite(tolerance))
-        throw Error(ErrorCode::argument, concat(where, ": tolerance ", tolerance, " is not finite"));
+    const double tolerance = options.tolerance.value_or(autoTolerance(spp));
+    if (!std::isfinite(tolerance) || tolerance < 0.0)
+        throw Error(ErrorCode::argument, concat(where, ": tolerance ", tolerance, " is not a finite value >= 0"));
     const double radius = 0.5 * options.filterWidth;
     const int reach = std::max(0, static_cast<int>(std::ceil(radius - 0.5)));  // neighbour pixels with samples in range
     const std::uint32_t gridY = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(spp)))));
@@ -274,7 +276,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     BuildStats result;
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
-    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads)));
+    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::vector<std::vector<VisibilityFunction>> rowTiles(tilesX);
     std::vector<TileStats> rowStats(tilesX);
     for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
@@ -312,4 +314,4 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     return result;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

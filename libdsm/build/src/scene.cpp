@@ -27,7 +27,7 @@
 #include "text.h"
 #include "vec3_math.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 namespace {
 
 using json = nlohmann::json;
@@ -1209,4 +1209,4 @@ Scene loadScene(const std::string& path, const SceneReadOptions& options) {
     return readScene(in, std::filesystem::path(path).parent_path().string(), path, options);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

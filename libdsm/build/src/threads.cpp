@@ -4,7 +4,7 @@
 
 #include <tbb/info.h>
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 unsigned availableCores() noexcept {
     return static_cast<unsigned>(std::max(1, tbb::info::default_concurrency()));
@@ -15,4 +15,4 @@ unsigned usableThreads(unsigned requested) noexcept {
     return requested == 0 ? cores : std::min(requested, cores);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

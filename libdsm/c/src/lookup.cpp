@@ -39,7 +39,7 @@ dsm_result dsm_lookup(dsm_lookup_context* context, const dsm_lookup_options* opt
         dsm::LookupOptions lookup;
         lookup.filter = static_cast<dsm::PixelFilter>(o.filter);
         lookup.filterWidth = o.filter_width;
-        lookup.level = o.level;
+        if (o.level != DSM_LEVEL_AUTO) lookup.level = static_cast<unsigned>(o.level);
         lookup.bias = o.bias;
 
         dsm::LookupContext& c = *context->context;

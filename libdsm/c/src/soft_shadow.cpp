@@ -65,7 +65,7 @@ dsm_result dsm_soft_shadow(dsm_soft_context* context, const dsm_soft_shadow_opti
                         "attenuation is not DSM_ATTENUATION_SUBTRACTIVE or DSM_ATTENUATION_MULTIPLICATIVE");
         dsm::SoftShadowOptions soft;
         soft.samples = o.samples;
-        soft.layers = o.layers;
+        if (o.layers != 0) soft.layers = o.layers;  // 0: all of the map's layers
         soft.zThreshold = o.z_threshold;
         soft.bias = o.bias;
         soft.visibilityThreshold = o.visibility_threshold;

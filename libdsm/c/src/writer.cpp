@@ -104,7 +104,7 @@ dsm_result dsm_writer_open(const char* path, const dsm_write_options* options, d
         w.filter = static_cast<dsm::PixelFilter>(o.filter);
         w.filterWidth = o.filter_width;
         w.tolerance = o.tolerance;
-        w.mipLevels = o.mip_levels;
+        if (o.mip_levels != 0) w.mipLevels = o.mip_levels;  // 0: a full pyramid
         w.levelToleranceFactor = o.level_tolerance_factor;
         w.zlibLevel = o.zlib_level;
         w.metadata = o.metadata ? o.metadata : "{}";

@@ -8,7 +8,7 @@
 #include "dsm/sweep.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -48,7 +48,7 @@ double since(Clock::time_point start) { return std::chrono::duration<double>(Clo
 
 }  // namespace
 
-VisibilityFunction buildVisibility(std::span<const SampleRay> rays, std::span<const double> weights,
+VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
                                    const CompressorOptions& options, PixelTimings* timings) {
     Compressor compressor(options);
     std::vector<VisibilityFunction> taus;
@@ -88,4 +88,4 @@ VisibilityFunction buildVisibility(std::span<const SampleRay> rays, std::span<co
     return result;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -7,7 +7,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -414,4 +414,4 @@ double autoTolerance(double samplesPerPixel) {
     return 0.25 / std::sqrt(samplesPerPixel);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

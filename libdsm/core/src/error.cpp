@@ -1,6 +1,6 @@
 #include "dsm/error.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 const char* errorCodeName(ErrorCode code) noexcept {
     switch (code) {
@@ -18,4 +18,4 @@ const char* errorCodeName(ErrorCode code) noexcept {
 
 Error::Error(ErrorCode code, const std::string& message) : std::runtime_error(message), code_(code) {}
 
-}  // namespace dsm
+DSM_NAMESPACE_END

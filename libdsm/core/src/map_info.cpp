@@ -6,7 +6,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 std::array<double, 3> LightCamera::worldToLightSpace(const std::array<double, 3>& p) const {
     const auto& m = worldToLight;
@@ -68,4 +68,4 @@ unsigned fullLevelCount(std::uint32_t width, std::uint32_t height) {
     return levels;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

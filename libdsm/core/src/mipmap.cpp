@@ -6,7 +6,7 @@
 #include "dsm/compressor.h"
 #include "dsm/sweep.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bool withCounts) {
     VisibilityFunction out(channels, withCounts);
@@ -49,4 +49,4 @@ VisibilityFunction averageFunctions(std::span<const VisibilityView> children, st
     return compressor.finish();
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

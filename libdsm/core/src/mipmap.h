@@ -6,7 +6,7 @@
 
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// The light-centre function of `f` as a single layer with `channels`
 /// channels (a monochrome function is repeated into RGB): layer 0, followed
@@ -20,4 +20,4 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
 VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
                                     double tolerance, bool withCounts);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

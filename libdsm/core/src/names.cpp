@@ -1,6 +1,6 @@
 #include "dsm/names.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 const char* projectionName(Projection projection) {
     switch (projection) {
@@ -25,4 +25,4 @@ std::optional<PixelFilter> pixelFilterFromName(std::string_view name) {
     return std::nullopt;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

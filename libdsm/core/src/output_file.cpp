@@ -15,7 +15,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -226,4 +226,4 @@ void OutputFile::commit() {
     removeStaleTemporaries(path_);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

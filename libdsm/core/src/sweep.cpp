@@ -8,7 +8,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -32,7 +32,7 @@ constexpr double kCancellationLimit = 1e6;
 
 }  // namespace
 
-std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span<const double> weights,
+std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
                            int channels, VertexSink& sink) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
@@ -179,4 +179,4 @@ std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span
     return std::nullopt;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

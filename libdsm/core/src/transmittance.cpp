@@ -7,7 +7,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -146,4 +146,4 @@ VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCo
     return out;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

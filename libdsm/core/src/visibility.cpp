@@ -7,7 +7,7 @@
 #include "dsm/vertex_sink.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -223,4 +223,4 @@ bool CollectingSink::push(float z, const double* values, std::uint32_t count) {
     return true;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

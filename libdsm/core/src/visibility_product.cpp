@@ -12,7 +12,7 @@
 #include "mipmap.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -288,13 +288,14 @@ std::size_t firstBlocked(const DenseFunction& f, double tolerance) {
 
 }  // namespace
 
-VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, const VisibilityProductOptions& options) {
+VisibilityProduct multiplyVisibility(Span<const VisibilityView> factors, const VisibilityProductOptions& options) {
     if (!std::isfinite(options.tolerance) || options.tolerance < 0.0)
         throw Error(ErrorCode::argument,
                     concat("visibility product: tolerance ", options.tolerance, " is not a finite value >= 0"));
-    if (std::isnan(options.maxInterpolationError) || std::isinf(options.maxInterpolationError))
+    if (options.maxInterpolationError &&
+        !(std::isfinite(*options.maxInterpolationError) && *options.maxInterpolationError > 0.0))
         throw Error(ErrorCode::argument, concat("visibility product: interpolation error ",
-                                                options.maxInterpolationError, " is not finite"));
+                                                *options.maxInterpolationError, " is not a finite value > 0"));
     if (options.maxLayers < 1 || options.maxLayers > 255)
         throw Error(ErrorCode::argument,
                     concat("visibility product: layer count ", options.maxLayers, " is not in [1, 255]"));
@@ -305,9 +306,8 @@ VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, co
         if (options.factorLayers[i] < 1 || options.factorLayers[i] > 255)
             throw Error(ErrorCode::argument, concat("visibility product: factor ", i, " layer count ",
                                                     options.factorLayers[i], " is not in [1, 255]"));
-    const double maxError = options.maxInterpolationError > 0.0
-                                ? options.maxInterpolationError
-                                : std::max(options.tolerance / 16.0, kMinInterpolationError);
+    const double maxError =
+        options.maxInterpolationError.value_or(std::max(options.tolerance / 16.0, kMinInterpolationError));
     int channels = 1;
     for (std::size_t i = 0; i < factors.size(); ++i) {
         const VisibilityView& f = factors[i];
@@ -380,4 +380,4 @@ VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors, co
     return result;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -53,7 +53,7 @@
 #include "dsm/writer.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -505,12 +505,12 @@ constexpr std::uint64_t kMaxSamplesPerBand = 1ull << 27;
 
 std::string quoted(const std::string& path) { return concat("'", path, "'"); }
 
-/// A maxDeviation or maxLinearError option: <= 0 for the default, else in
-/// [kMinExrErrorBound, 1]. NaN is refused rather than taken for the default.
-void checkErrorBoundOption(double value, const char* what) {
-    if (value <= 0.0) return;
-    if (!(value >= kMinExrErrorBound && value <= 1.0))
-        throw Error(ErrorCode::argument, concat(what, " ", value, " is outside [", kMinExrErrorBound,
+/// A maxDeviation or maxLinearError option: unset for the default, else in
+/// [kMinExrErrorBound, 1] (NaN refused).
+void checkErrorBoundOption(std::optional<double> value, const char* what) {
+    if (!value) return;
+    if (!(*value >= kMinExrErrorBound && *value <= 1.0))
+        throw Error(ErrorCode::argument, concat(what, " ", *value, " is outside [", kMinExrErrorBound,
                                                 ", 1] (float32 samples cannot keep a tighter bound)"));
 }
 
@@ -605,7 +605,7 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     report.height = level.height;
     report.channels = info.channels;
     report.maxDeviation =
-        options.maxDeviation > 0.0 ? options.maxDeviation : std::clamp(level.tolerance / 2.0, 1e-5, 1e-3);
+        options.maxDeviation.value_or(std::clamp(level.tolerance / 2.0, 1e-5, 1e-3));
     if (!std::isfinite(report.maxDeviation))
         throw Error(ErrorCode::argument,
                     concat("deep EXR export: the largest deviation must be finite, got ", report.maxDeviation));
@@ -1011,17 +1011,18 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
                             std::uint32_t height) {
     LightCamera cam;
     double half = 0.0;
-    if (options.fieldOfView > 0.0) {
-        if (!(options.fieldOfView < 180.0))
-            throw Error(ErrorCode::argument,
-                        concat("field of view ", options.fieldOfView, " is not below 180 degrees"));
+    if (options.fieldOfView) {
+        const double degrees = *options.fieldOfView;
+        if (!(degrees > 0.0 && degrees < 180.0))
+            throw Error(ErrorCode::argument, concat("field of view ", degrees, " is not in (0, 180) degrees"));
         cam.projection = Projection::Perspective;
-        half = std::tan(options.fieldOfView * std::numbers::pi / 360.0);
+        half = std::tan(degrees * std::numbers::pi / 360.0);
     } else {
-        if (!std::isfinite(options.orthoWidth))
-            throw Error(ErrorCode::argument, "the orthographic width must be finite");
+        const double width = options.orthoWidth.value_or(0.0);
+        if (!std::isfinite(width) || !(width > 0.0))
+            throw Error(ErrorCode::argument, concat("the orthographic width ", width, " is not a finite value > 0"));
         cam.projection = Projection::Orthographic;
-        half = options.orthoWidth / 2.0;
+        half = width / 2.0;
     }
     const double halfHeight = half * double(height) / double(width);
     cam.screenWindow = {-half, half, -halfHeight, halfHeight};
@@ -1037,9 +1038,9 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
 ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
                               const ExrImportOptions& options) {
     checkErrorBoundOption(options.maxLinearError, "deep EXR import: the linearisation error");
-    if (!std::isfinite(options.tolerance))
-        throw Error(ErrorCode::argument,
-                    concat("deep EXR import: the tolerance must be finite, got ", options.tolerance));
+    if (options.tolerance && !(std::isfinite(*options.tolerance) && *options.tolerance >= 0.0))
+        throw Error(ErrorCode::argument, concat("deep EXR import: the tolerance must be a finite value >= 0, got ",
+                                                *options.tolerance));
     checkOutputPath(dsmPath);
     refuseOutputOverInputs(dsmPath, {exrPath});
     try {
@@ -1055,9 +1056,9 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
         if (options.camera) {
             w.camera = *options.camera;
             report.cameraSource = "option";
-        } else if (options.fieldOfView > 0.0 || options.orthoWidth > 0.0) {
+        } else if (options.fieldOfView || options.orthoWidth) {
             w.camera = cameraFromWidth(h, options, report.width, report.height);
-            report.cameraSource = options.fieldOfView > 0.0 ? "field of view" : "orthographic width";
+            report.cameraSource = options.fieldOfView ? "field of view" : "orthographic width";
         } else {
             std::optional<LightCamera> cam;
             try {
@@ -1073,14 +1074,14 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
             w.camera = *cam;
         }
         const auto* fileTolerance = findAttribute<Imf::DoubleAttribute>(h, "dsm:tolerance");
-        report.tolerance = options.tolerance >= 0.0 ? options.tolerance
+        report.tolerance = options.tolerance ? *options.tolerance
                            : fileTolerance && fileTolerance->value() >= 0.0 && std::isfinite(fileTolerance->value())
                                ? fileTolerance->value()
                                : kDefaultExrImportTolerance;
-        if (!std::isfinite(report.tolerance))
-            throw Error(ErrorCode::argument, concat("the tolerance must be finite, got ", report.tolerance));
-        report.maxLinearError =
-            options.maxLinearError > 0.0 ? options.maxLinearError : std::clamp(report.tolerance / 4.0, 1e-5, 1e-3);
+        if (!std::isfinite(report.tolerance) || report.tolerance < 0.0)
+            throw Error(ErrorCode::argument,
+                        concat("the tolerance must be a finite value >= 0, got ", report.tolerance));
+        report.maxLinearError = options.maxLinearError.value_or(std::clamp(report.tolerance / 4.0, 1e-5, 1e-3));
 
         w.width = report.width;
         w.height = report.height;
@@ -1151,4 +1152,4 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
     }
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

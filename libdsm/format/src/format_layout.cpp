@@ -76,9 +76,9 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     Header h;
     h.versionMajor = r.u16();
     h.versionMinor = r.u16();
-    if (h.versionMajor != kVersionMajor)
+    if (h.versionMajor != kFormatVersionMajor)
         fail(concat("format version ", h.versionMajor, ".", h.versionMinor, " is not supported (this reader reads ",
-                    kVersionMajor, ".x)"),
+                    kFormatVersionMajor, ".x)"),
              ErrorCode::unsupported);
     h.headerSize = r.u32();
     if (h.headerSize < kHeaderSize) fail(concat("header size ", h.headerSize, " is below the minimum ", kHeaderSize));

@@ -9,12 +9,11 @@
 
 #include "dsm/map_info.h"
 #include "dsm/reader.h"
+#include "dsm/version.h"
 
 namespace dsm::format {
 
 inline constexpr std::array<std::uint8_t, 8> kMagic{0x89, 'D', 'S', 'M', 0x0D, 0x0A, 0x1A, 0x0A};
-inline constexpr std::uint16_t kVersionMajor = 1;
-inline constexpr std::uint16_t kVersionMinor = 0;
 
 // Section sizes written by this version; readers accept larger ones (a newer
 // minor version appended fields) and read the fields they know.
@@ -38,8 +37,8 @@ inline constexpr std::uint32_t kMaxTileSize = 4096;
 
 /// The fixed header (byte offsets in the spec's table).
 struct Header {
-    std::uint16_t versionMajor = kVersionMajor;
-    std::uint16_t versionMinor = kVersionMinor;
+    std::uint16_t versionMajor = kFormatVersionMajor;
+    std::uint16_t versionMinor = kFormatVersionMinor;
     std::uint32_t headerSize = kHeaderSize;
     std::uint32_t requiredFlags = 0;
     std::uint32_t optionalFlags = 0;

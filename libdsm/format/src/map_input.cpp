@@ -12,7 +12,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -83,4 +83,4 @@ std::shared_ptr<const MapInput> MapInput::memory(const void* data, std::size_t s
     return std::make_shared<MemoryInput>(data, size);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

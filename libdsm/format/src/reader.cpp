@@ -11,7 +11,7 @@
 #include "tile_codec.h"
 #include "reader_impl.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -120,13 +120,13 @@ void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const st
     info.metadata = std::move(metadata);
 
     cache = options.cache ? options.cache : TileCache::defaultCache();
-    fileId = cache->impl().newFileId();
+    fileId = ImplAccess::of(*cache).newFileId();
 }
 
 std::shared_ptr<const format::DecodedTile> DeepShadowMap::Impl::getTile(unsigned level, std::uint32_t tx,
                                                                         std::uint32_t ty) const {
     const TileKey key{fileId, level, ty * info.levels[level].tilesX + tx};
-    return cache->impl().get<format::DecodedTile>(key, [&] { return loadTile(level, tx, ty); });
+    return ImplAccess::of(*cache).get<format::DecodedTile>(key, [&] { return loadTile(level, tx, ty); });
 }
 
 DeepShadowMap::DeepShadowMap() : impl_(std::make_unique<Impl>()) {}
@@ -162,7 +162,10 @@ PixelFunction DeepShadowMap::pixel(unsigned level, std::uint32_t x, std::uint32_
     auto tile = s.getTile(level, tx, ty);
     const std::uint32_t w = s.tileExtent(L.width, tx);
     const VisibilityView view = tile->pixel(std::size_t(y - ty * s.info.tileSize) * w + (x - tx * s.info.tileSize));
-    return PixelFunction(std::move(tile), view);
+    // The aliasing constructor shares ownership of the tile while storing no
+    // pointer: the opaque keep-alive handle never points anywhere.
+    using TileOwner = ImplAccess::TileOwner<PixelFunction>;
+    return ImplAccess::make<PixelFunction>(std::shared_ptr<const TileOwner>(std::move(tile), nullptr), view);
 }
 
 TileSummary DeepShadowMap::tile(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
@@ -183,10 +186,10 @@ void validate(std::shared_ptr<const MapInput> input, const std::string& name, co
     ReaderOptions uncached = options;
     uncached.cache = TileCache::create(0);
     const auto map = DeepShadowMap::open(std::move(input), name, uncached);
-    const auto& s = map->impl();
+    const auto& s = ImplAccess::of(*map);
     for (unsigned l = 0; l < s.info.levels.size(); ++l)
         for (std::uint32_t ty = 0; ty < s.info.levels[l].tilesY; ++ty)
             for (std::uint32_t tx = 0; tx < s.info.levels[l].tilesX; ++tx) s.loadTile(l, tx, ty);
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -10,11 +10,12 @@
 #include "dsm/error.h"
 #include "dsm/map_input.h"
 #include "dsm/reader.h"
+#include "impl_access.h"
 #include "text.h"
 #include "tile_cache_impl.h"
 #include "tile_codec.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -28,7 +29,7 @@ struct DeepShadowMap::Impl {
     std::uint64_t fileId = 0;
 
     ~Impl() {
-        if (cache && fileId) cache->impl().forgetFile(fileId);
+        if (cache && fileId) ImplAccess::of(*cache).forgetFile(fileId);
     }
 
     std::string where() const { return concat("'", path, "'"); }
@@ -79,4 +80,4 @@ struct DeepShadowMap::Impl {
     std::shared_ptr<const format::DecodedTile> getTile(unsigned level, std::uint32_t tx, std::uint32_t ty) const;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -46,7 +46,7 @@
 #include "splitmix64.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -213,4 +213,4 @@ TileCacheStats TileCache::stats() const { return impl_->stats(); }
 void TileCache::resetStats() { impl_->resetStats(); }
 void TileCache::clear() { impl_->clear(); }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -7,8 +7,9 @@
 #include <memory>
 
 #include "dsm/tile_cache.h"
+#include "tested_internal.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// Identifies one tile: an id from newFileId() for each open file, the mip
 /// level and the tile index within the level.
@@ -27,7 +28,7 @@ struct LoadedTile {
     std::size_t fileBytes = 0;
 };
 
-struct TileCache::Impl {
+struct DSM_TESTED_INTERNAL TileCache::Impl {
     explicit Impl(std::size_t budgetBytes);
     ~Impl();
 
@@ -61,4 +62,4 @@ private:
     std::unique_ptr<State> state_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

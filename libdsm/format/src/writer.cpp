@@ -13,7 +13,7 @@
 #include "text.h"
 #include "tile_codec.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -155,7 +155,8 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : im
     }
 
     const unsigned full = fullLevelCount(options.width, options.height);
-    const unsigned count = options.mipLevels == 0 ? full : std::min(options.mipLevels, full);
+    if (options.mipLevels && *options.mipLevels == 0) fail("mip level count 0 is not >= 1");
+    const unsigned count = std::min(options.mipLevels.value_or(full), full);
     double tolerance = options.tolerance, bound = 0.0;
     for (unsigned l = 0; l < count; ++l) {
         Level L;
@@ -189,7 +190,7 @@ std::uint32_t MapWriter::tileHeight(std::uint32_t ty) const {
     return impl_->tileExtent(impl_->levels[0].info.height, ty);
 }
 
-void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const VisibilityFunction> pixels) {
+void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels) {
     Impl& s = *impl_;
     const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
     if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
@@ -274,4 +275,4 @@ void MapWriter::finish() {
     s.finished = true;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -11,7 +11,7 @@
 #include "reader_impl.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -63,7 +63,7 @@ void axisWeights(PixelFilter filter, double c, double w, std::uint32_t extent, A
 
 struct LookupContext::Impl {
     std::shared_ptr<const DeepShadowMap> map;
-    const DeepShadowMap::Impl* reader = nullptr;
+    const ImplAccess::Impl<DeepShadowMap>* reader = nullptr;
     LookupFailure failure;
 
     struct CachedTile {
@@ -147,7 +147,7 @@ struct LookupContext::Impl {
 
 LookupContext::LookupContext(std::shared_ptr<const DeepShadowMap> map) : impl_(std::make_unique<Impl>()) {
     if (!map) throw Error(ErrorCode::argument, "lookup: no map given");
-    impl_->reader = &map->impl();
+    impl_->reader = &ImplAccess::of(*map);
     impl_->map = std::move(map);
 }
 
@@ -178,8 +178,8 @@ LookupResult LookupContext::raster(double rx, double ry, double z, const LookupO
 
     unsigned level0, level1;
     double blend;
-    if (options.level >= 0) {
-        level0 = level1 = std::min(static_cast<unsigned>(options.level), coarsest);
+    if (options.level) {
+        level0 = level1 = std::min(*options.level, coarsest);
         blend = 0.0;
     } else {
         const double lambda = std::max(0.0, std::log2(width / minWidth));
@@ -282,4 +282,4 @@ bool LookupContext::tryWorld(const std::array<double, 3>& p, const LookupOptions
 
 const LookupFailure& LookupContext::lastFailure() const noexcept { return impl_->failure; }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -10,7 +10,7 @@
 #include "dsm/error.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -114,4 +114,4 @@ VertexHistogram vertexHistogram(const DeepShadowMap& map, unsigned level) {
     return h;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -27,7 +27,7 @@
 #include "text.h"
 #include "tile_codec.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -165,9 +165,9 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
         inputBound += bound;
         inputs.push_back({{"file", map->path()}, {"level0_error_bound", bound}, {"metadata", metadata}});
     }
-    if (options.tolerance >= 0.0) tolerance = options.tolerance;
-    if (!std::isfinite(tolerance))
-        throw Error(ErrorCode::argument, concat("merge: tolerance ", tolerance, " is not finite"));
+    if (options.tolerance) tolerance = *options.tolerance;
+    if (!std::isfinite(tolerance) || tolerance < 0.0)
+        throw Error(ErrorCode::argument, concat("merge: tolerance ", tolerance, " is not a finite value >= 0"));
 
     VisibilityProductOptions product;
     product.tolerance = tolerance;
@@ -204,7 +204,7 @@ MergeReport multiplyMaps(const std::vector<Map>& maps, const std::string& output
     report.channels = channels;
     report.maxLayers = product.maxLayers;
     report.tolerance = tolerance;
-    report.zlibLevel = options.zlibLevel < 0 ? kDefaultZlibLevel : options.zlibLevel;
+    report.zlibLevel = options.zlibLevel.value_or(kDefaultZlibLevel);
     report.interpolationError = interpolation;
     report.inputErrorBound = inputBound + interpolation;
     report.errorBound = report.inputErrorBound + std::max(tolerance, kStoreRounding);
@@ -439,7 +439,7 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
     report.channels = info.channels;
     report.maxLayers = info.maxLayers;
     report.tolerance = info.levels.at(0).tolerance;
-    report.zlibLevel = options.zlibLevel >= 0 ? options.zlibLevel : detectZlibLevel(maps);
+    report.zlibLevel = options.zlibLevel ? *options.zlibLevel : detectZlibLevel(maps);
     report.inputErrorBound = info.levels.at(0).errorBound;
     report.errorBound = report.inputErrorBound;
 
@@ -494,8 +494,8 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
 
 MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string& output, const MergeOptions& options) {
     checkOutput(inputs, output);
-    if (options.zlibLevel > 9)
-        throw Error(ErrorCode::argument, concat("merge: zlib level ", options.zlibLevel, " is not in [0, 9]"));
+    if (options.zlibLevel && (*options.zlibLevel < 0 || *options.zlibLevel > 9))
+        throw Error(ErrorCode::argument, concat("merge: zlib level ", *options.zlibLevel, " is not in [0, 9]"));
     const std::vector<Map> maps = openAll(inputs);
     switch (options.mode) {
         case MergeMode::Product: return multiplyMaps(maps, output, options);
@@ -504,4 +504,4 @@ MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string&
     throw Error(ErrorCode::argument, "merge: unknown mode");
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -27,7 +27,7 @@
 #include "affine.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 namespace {
 
@@ -603,4 +603,4 @@ std::optional<RayHit> ReferenceTracer::closestHit(const Vec3& origin, const Vec3
     return hit;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -14,7 +14,7 @@
 #include "splitmix64.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
@@ -43,7 +43,7 @@ void concentricDisk(double u, double v, double& x, double& y) {
 }  // namespace
 
 AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, double halfWidth, double halfHeight,
-                          double planeDepth) {
+                          std::optional<double> givenPlaneDepth) {
     camera.validate();
     const char* what = shape == AreaLightShape::Disk ? "disk" : "rectangle";
     if (camera.projection != Projection::Perspective)
@@ -58,7 +58,7 @@ AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, doubl
         throw Error(ErrorCode::argument, concat("area light: the light camera's window [", w[0], ", ", w[1], "] x [",
                                                 w[2], ", ", w[3], "] does not contain its axis"));
     const double fit = std::max(halfWidth / tanX, halfHeight / tanY);  // smallest plane depth that fits
-    if (planeDepth < 0.0) planeDepth = fit;
+    const double planeDepth = givenPlaneDepth.value_or(fit);
     if (!std::isfinite(planeDepth))
         throw Error(ErrorCode::argument, concat("area light: plane depth ", planeDepth, " is not finite"));
     // A light wider than the frustum at its plane sends rays the map never saw.
@@ -80,11 +80,12 @@ AreaLight AreaLight::make(const LightCamera& camera, AreaLightShape shape, doubl
     return light;
 }
 
-AreaLight AreaLight::disk(const LightCamera& camera, double radius, double planeDepth) {
+AreaLight AreaLight::disk(const LightCamera& camera, double radius, std::optional<double> planeDepth) {
     return make(camera, AreaLightShape::Disk, radius, radius, planeDepth);
 }
 
-AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, double halfHeight, double planeDepth) {
+AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, double halfHeight,
+                               std::optional<double> planeDepth) {
     return make(camera, AreaLightShape::Rectangle, halfWidth, halfHeight, planeDepth);
 }
 
@@ -108,7 +109,7 @@ double AreaLight::recordedRadius(const MapInfo& info) {
 AreaLight AreaLight::forMap(const MapInfo& info, AreaLightShape shape, double halfWidth, double halfHeight) {
     // A distant light first gets make()'s own complaint: it has no position.
     if (info.camera.projection != Projection::Perspective)
-        return make(info.camera, shape, halfWidth, halfHeight, -1.0);
+        return make(info.camera, shape, halfWidth, halfHeight, std::nullopt);
     const double built = recordedRadius(info);
     if (!(built > 0.0))
         throw Error(ErrorCode::argument,
@@ -169,4 +170,4 @@ std::vector<Vec3> AreaLight::samples(const Vec3& receiverWorld, int count, std::
     return light;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -67,7 +67,7 @@ const DepthHierarchy::TilePyramid& DepthHierarchy::tilePyramid(std::uint32_t tx,
     std::atomic<const TilePyramid*>& slot = tiles_[std::size_t(ty) * tilesX_ + tx];
     if (const TilePyramid* p = slot.load(std::memory_order_acquire)) return *p;
 
-    const auto tile = map_.impl().getTile(0, tx, ty);
+    const auto tile = ImplAccess::of(map_).getTile(0, tx, ty);
     auto pyramid = std::make_unique<TilePyramid>();
     // Level 1 straight from the pixels, coarser ones from the level below.
     std::uint32_t w = tile->width, h = tile->height;

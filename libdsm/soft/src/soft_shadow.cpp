@@ -11,7 +11,7 @@
 #include "reader_impl.h"
 #include "text.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 using detail::DepthRange;
@@ -20,7 +20,7 @@ struct SoftShadowTracer::Impl {
     std::shared_ptr<const DeepShadowMap> map;
     AreaLight light;
     std::unique_ptr<detail::DepthHierarchy> hierarchy;
-    const DeepShadowMap::Impl* reader = nullptr;
+    const ImplAccess::Impl<DeepShadowMap>* reader = nullptr;
 };
 
 SoftShadowTracer::SoftShadowTracer(std::shared_ptr<const DeepShadowMap> map, const AreaLight& light)
@@ -33,7 +33,7 @@ SoftShadowTracer::SoftShadowTracer(std::shared_ptr<const DeepShadowMap> map, con
     if (info.width == 0 || info.height == 0 || info.levels.empty())
         throw Error(ErrorCode::argument, concat("soft shadow: '", map->path(), "': the map is empty"));
     impl_->hierarchy = std::make_unique<detail::DepthHierarchy>(*map);
-    impl_->reader = &map->impl();
+    impl_->reader = &ImplAccess::of(*map);
     impl_->map = std::move(map);
 }
 
@@ -101,7 +101,7 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double l
 
 struct SoftShadowContext::Impl {
     std::shared_ptr<const SoftShadowTracer> tracer;
-    const SoftShadowTracer::Impl* shared = nullptr;
+    const ImplAccess::Impl<SoftShadowTracer>* shared = nullptr;
     std::unique_ptr<LookupContext> lookup;
     SoftShadowStats stats;
     std::vector<Vec3> lightSamples;
@@ -355,8 +355,8 @@ struct SoftShadowContext::Impl {
         if (o.samples < 1 || o.samples > (1 << 20))
             throw Error(ErrorCode::argument,
                         concat("soft shadow: sample count ", o.samples, " is not in [1, 1048576]"));
-        if (o.layers < 0)
-            throw Error(ErrorCode::argument, concat("soft shadow: layer count ", o.layers, " is negative"));
+        if (o.layers && *o.layers < 1)
+            throw Error(ErrorCode::argument, concat("soft shadow: layer count ", *o.layers, " is not >= 1"));
         if (!(o.zThreshold >= 0.0) || !std::isfinite(o.zThreshold))
             throw Error(ErrorCode::argument,
                         concat("soft shadow: z threshold ", o.zThreshold, " is not a finite value >= 0"));
@@ -395,7 +395,7 @@ struct SoftShadowContext::Impl {
 SoftShadowContext::SoftShadowContext(std::shared_ptr<const SoftShadowTracer> tracer)
     : impl_(std::make_unique<Impl>()) {
     if (!tracer) throw Error(ErrorCode::argument, "soft shadow: no tracer given");
-    impl_->shared = &tracer->impl();
+    impl_->shared = &ImplAccess::of(*tracer);
     impl_->lookup = std::make_unique<LookupContext>(impl_->shared->map);
     impl_->tracer = std::move(tracer);
 }
@@ -413,7 +413,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     if (!s.begin(receiverWorld, options, result, p, prx, pry)) return result;
     s.stopBelow = options.visibilityThreshold;
     s.attenuation = options.attenuation;
-    s.layers = static_cast<std::size_t>(options.layers == 0 ? m.maxLayers : std::min(options.layers, m.maxLayers));
+    s.layers = static_cast<std::size_t>(std::min(options.layers.value_or(m.maxLayers), m.maxLayers));
     const double d = s.shared->light.planeDepth();
     const double zEnd = p[2] - options.bias;
     double zStart = d;
@@ -488,4 +488,4 @@ SoftShadowResult SoftShadowContext::pcfVisibility(const Vec3& receiverWorld, con
     return result;
 }
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -5,33 +5,35 @@
 #include <array>
 #include <cstdint>
 #include <functional>
+#include <optional>
 #include <span>
 #include <string>
 
 #include "dsm/map_info.h"
 #include "dsm/scene.h"
 #include "dsm/transmittance.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct BuildOptions {
-    /// Image size; 0 keeps the scene light's resolution.
-    std::uint32_t width = 0;
-    std::uint32_t height = 0;
+    /// Image size, each >= 1; unset keeps the scene light's resolution.
+    std::optional<std::uint32_t> width;
+    std::optional<std::uint32_t> height;
     /// Samples per pixel, stratified and jittered: one sample in each cell of
     /// a g x ceil(spp / g) grid over the pixel, g = floor(sqrt(spp)) (a
     /// sqrt x sqrt grid when spp is a square). When the grid has more cells
     /// than spp, each pixel uses spp of them chosen at random. Shutter times
     /// are stratified likewise, spp strata in random order.
     std::uint32_t samplesPerPixel = 16;
-    /// Compression tolerance; negative means auto = 0.25 / sqrt(samples per
-    /// pixel) (Lokovic & Veach §4).
-    double tolerance = -1.0;
+    /// Compression tolerance, finite and >= 0; unset (automatic) = 0.25 /
+    /// sqrt(samples per pixel) (Lokovic & Veach §4).
+    std::optional<double> tolerance;
     PixelFilter filter = PixelFilter::Gaussian;
     /// Filter width in pixels (the footprint's diameter).
     double filterWidth = 2.0;
-    /// 0 = full pyramid, 1 = no mip-maps, N levels otherwise.
-    unsigned mipLevels = 0;
+    /// As WriterOptions::mipLevels: 1 = no mip-maps, N levels; unset = full pyramid.
+    std::optional<unsigned> mipLevels;
     std::uint32_t tileSize = 32;
     /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts).
     int mtsmLayers = 1;
@@ -40,9 +42,10 @@ struct BuildOptions {
     /// Pixel rectangle [x0, x1) x [y0, y1) to build; the rest of the map is
     /// left empty (for distributed builds stitched later). Empty = everything.
     std::array<std::uint32_t, 4> region{0, 0, 0, 0};
-    /// Worker threads; 0 = all cores, and more than the cores are clamped to
-    /// them (usableThreads(), dsm/threads.h). The output does not depend on it.
-    unsigned threads = 0;
+    /// Worker threads, >= 1; unset uses all cores, and more than the cores are
+    /// clamped to them (usableThreads(), dsm/threads.h). The output does not
+    /// depend on it.
+    std::optional<unsigned> threads;
     std::uint64_t seed = 1;
     int zlibLevel = 6;
     /// Called now and then with the fraction done, from the calling thread.
@@ -87,11 +90,11 @@ struct BuildEstimate {
 
 /// The estimate for buildMap(scene, options, ...), without building; options
 /// are not checked (buildMap does that).
-BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options);
+DSM_API BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options);
 
 /// Renders `scene` from its light and writes the map to `path` (atomically:
 /// nothing is left at `path` on failure). Deterministic: the same scene,
 /// options and seed give a byte-identical file for any thread count.
-BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path);
+DSM_API BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

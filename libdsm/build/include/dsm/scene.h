@@ -13,8 +13,9 @@
 
 #include "dsm/map_info.h"
 #include "dsm/vec3.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 using Rgb = std::array<float, 3>;
 
@@ -143,7 +144,7 @@ struct HairBallParameters {
     std::uint32_t segments = 8;
     std::uint32_t seed = 1;
 };
-Curves generateHairBall(const HairBallParameters& parameters);
+DSM_API Curves generateHairBall(const HairBallParameters& parameters);
 
 /// Limits on what reading a scene may consume (spec/scene.md §1.2).
 struct SceneReadOptions {
@@ -164,24 +165,24 @@ inline constexpr std::size_t kMaxSceneNesting = 64;
 
 /// Reads Cem Yuksel's binary .hair format (header "HAIR", points, optional
 /// segments, thickness). Throws dsm::Error naming the file on bad input.
-Curves loadHairFile(const std::string& path);
+DSM_API Curves loadHairFile(const std::string& path);
 
 /// Reads a scene file (spec/scene.md). Relative file names inside (OBJ, .hair,
 /// .vdb) are relative to the scene file. Throws dsm::Error naming the file, the
 /// JSON path (e.g. "/objects/2/opacity") and what was expected: ErrorCode::scene
 /// for an invalid scene, ::limit for one too large or too deeply nested, ::io
 /// when the file cannot be read.
-Scene loadScene(const std::string& path, const SceneReadOptions& options = {});
+DSM_API Scene loadScene(const std::string& path, const SceneReadOptions& options = {});
 /// Reads a scene from a stream (e.g. standard input) up to its end, never more
 /// than `options.maxBytes`; otherwise as parseScene().
-Scene readScene(std::istream& in, const std::string& baseDirectory, const std::string& name,
-                const SceneReadOptions& options = {});
+DSM_API Scene readScene(std::istream& in, const std::string& baseDirectory, const std::string& name,
+                        const SceneReadOptions& options = {});
 /// Parses scene JSON text; `baseDirectory` resolves relative file names and
 /// `name` is used in messages.
-Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name,
-                 const SceneReadOptions& options = {});
+DSM_API Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, const std::string& name,
+                         const SceneReadOptions& options = {});
 
 /// The light camera of a scene's light (with the area-light push-back).
-LightCamera lightCamera(const LightDescription& light);
+DSM_API LightCamera lightCamera(const LightDescription& light);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -4,13 +4,14 @@
 #pragma once
 
 #include <cstdint>
-#include <span>
 
 #include "dsm/compressor.h"
 #include "dsm/transmittance.h"
+#include "dsm/span.h"
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// The visibility function of one pixel: the filter-weighted average of the
 /// transmittance of `rays` (weights[k] for rays[k]), compressed with
@@ -32,7 +33,7 @@ struct PixelTimings {
     double compressionSeconds = 0.0;
     std::uint64_t transmittanceVertices = 0;
 };
-VisibilityFunction buildVisibility(std::span<const SampleRay> rays, std::span<const double> weights,
+DSM_API VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
                                    const CompressorOptions& options, PixelTimings* timings = nullptr);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

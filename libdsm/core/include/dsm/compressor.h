@@ -5,10 +5,11 @@
 #include <cstdint>
 #include <memory>
 
+#include "dsm/version.h"
 #include "dsm/vertex_sink.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct CompressorOptions {
     /// The L-infinity tolerance epsilon, >= 0. 0 keeps every vertex except
@@ -48,8 +49,14 @@ struct CompressorOptions {
 ///
 /// Input checks: z finite, >= 0, non-decreasing; values finite, in [0, 1],
 /// non-increasing within a layer. A violation throws dsm::Error naming the
-/// input vertex index, channel and value.
-class Compressor final : public VertexSink {
+/// input vertex index, channel and value; the compressor is then in an
+/// unspecified state until finish() (whose result is to be dropped) resets it.
+/// Bad options throw dsm::Error from the constructor.
+///
+/// Thread safety: not thread-safe; one compressor per thread (it holds the
+/// state of the function being compressed). Separate compressors are
+/// independent. compress() and autoTolerance() are thread-safe.
+class DSM_API Compressor final : public VertexSink {
 public:
     explicit Compressor(const CompressorOptions& options);
     ~Compressor() override;
@@ -79,10 +86,10 @@ private:
 };
 
 /// One-shot helper: compresses a stored function (all its layers, as layers).
-VisibilityFunction compress(const VisibilityFunction& input, double tolerance, bool allowMonochrome = true);
+DSM_API VisibilityFunction compress(const VisibilityFunction& input, double tolerance, bool allowMonochrome = true);
 
 /// Lokovic & Veach's default tolerance 0.25 / sqrt(N) for N samples per pixel
 /// (§4): half the expected noise 0.5 / sqrt(N) of N stratified samples.
-double autoTolerance(double samplesPerPixel);
+DSM_API double autoTolerance(double samplesPerPixel);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -4,7 +4,9 @@
 #include <stdexcept>
 #include <string>
 
-namespace dsm {
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 /// What kind of failure a dsm::Error reports. Tools choose their exit status
 /// and the C API its dsm_result from this code, never from the message text.
@@ -20,12 +22,13 @@ enum class ErrorCode {
 };
 
 /// The code's name as printed in messages and documentation ("io", "corrupt", ...).
-const char* errorCodeName(ErrorCode code) noexcept;
+DSM_API const char* errorCodeName(ErrorCode code) noexcept;
 
 /// Every failure inside libdsm is reported by throwing dsm::Error. The message
 /// is one line and names what is wrong and where: the file, mip level, tile,
 /// pixel, vertex index, JSON pointer or input line, whichever are known.
-class Error : public std::runtime_error {
+/// Thread safety: as std::runtime_error (immutable; const members from any thread).
+class DSM_API Error : public std::runtime_error {
 public:
     Error(ErrorCode code, const std::string& message);
 
@@ -35,4 +38,4 @@ private:
     ErrorCode code_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -7,7 +7,10 @@
 #include <string>
 #include <vector>
 
-namespace dsm {
+#include "dsm/vec3.h"
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 /// How the light sees the scene. Light space: x right, y up, z forward along
 /// the view axis. Depth in a map is light-space z (world units when the
@@ -25,7 +28,7 @@ enum class PixelFilter : std::uint8_t { Box = 0, Triangle = 1, Gaussian = 2 };
 /// raster [0, width] x [0, height] with raster y pointing down:
 ///   rx = (sx - xmin) / (xmax - xmin) * width,  ry = (ymax - sy) / (ymax - ymin) * height.
 /// Pixel (i, j) covers [i, i+1) x [j, j+1); its centre is (i + 0.5, j + 0.5).
-struct LightCamera {
+struct DSM_API LightCamera {
     Projection projection = Projection::Perspective;
     /// Row-major 4x4 matrix M with light = M * (world, 1).
     std::array<double, 16> worldToLight{1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
@@ -44,7 +47,11 @@ struct LightCamera {
     /// Throws dsm::Error when a field is not finite or the window is empty.
     void validate() const;
 
-    friend bool operator==(const LightCamera&, const LightCamera&) = default;
+    friend bool operator==(const LightCamera& a, const LightCamera& b) {
+        return a.projection == b.projection && a.worldToLight == b.worldToLight &&
+               a.screenWindow == b.screenWindow && a.nearPlane == b.nearPlane;
+    }
+    friend bool operator!=(const LightCamera& a, const LightCamera& b) { return !(a == b); }
 };
 
 /// One mip level (Lokovic & Veach §5.3).
@@ -91,8 +98,8 @@ struct MapInfo {
 
 /// Size of mip level `level` of a width x height map: each level halves the
 /// previous one, rounding up, down to 1.
-std::uint32_t levelExtent(std::uint32_t fullExtent, unsigned level);
+DSM_API std::uint32_t levelExtent(std::uint32_t fullExtent, unsigned level);
 /// Number of levels of a full pyramid down to 1 x 1.
-unsigned fullLevelCount(std::uint32_t width, std::uint32_t height);
+DSM_API unsigned fullLevelCount(std::uint32_t width, std::uint32_t height);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

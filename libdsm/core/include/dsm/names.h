@@ -6,13 +6,14 @@
 #include <string_view>
 
 #include "dsm/map_info.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
-const char* projectionName(Projection projection);
-const char* filterName(PixelFilter filter);
+DSM_API const char* projectionName(Projection projection);
+DSM_API const char* filterName(PixelFilter filter);
 /// The filter named "box", "triangle" or "gaussian" (as filterName() gives);
 /// nothing for any other text.
-std::optional<PixelFilter> pixelFilterFromName(std::string_view name);
+DSM_API std::optional<PixelFilter> pixelFilterFromName(std::string_view name);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -11,32 +11,34 @@
 #include <string_view>
 #include <vector>
 
-namespace dsm {
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 /// Checks, before any work is done, that `path` can be written as an output:
 /// not empty, not a directory (nor a name ending in '/'), not a device, FIFO
 /// or socket, in a directory that exists and may be written. Throws
 /// dsm::Error naming the file (ErrorCode::argument for a name that cannot be
 /// an output file, ErrorCode::io for a place that cannot be written).
-void checkOutputPath(const std::string& path);
+DSM_API void checkOutputPath(const std::string& path);
 
 /// Throws dsm::Error (ErrorCode::argument) when `output` is the same file as
 /// one of `inputs` (same device and inode, so also through hard and symbolic
 /// links). Inputs that do not exist are ignored.
-void refuseOutputOverInputs(const std::string& output, const std::vector<std::string>& inputs);
+DSM_API void refuseOutputOverInputs(const std::string& output, const std::vector<std::string>& inputs);
 
 /// Throws dsm::Error (ErrorCode::argument) when two of `outputs` name the same
 /// file: the same existing file, or the same name in the same directory.
-void refuseSharedOutputs(const std::vector<std::string>& outputs);
+DSM_API void refuseSharedOutputs(const std::vector<std::string>& outputs);
 
 /// Temporaries left beside `path` by interrupted writes: the files
 /// `.NAME.tmp-*` next to it (NAME is `path`'s file name) not modified for
 /// `minimumAgeSeconds`. Sorted paths.
-std::vector<std::string> staleTemporaries(const std::string& path, std::int64_t minimumAgeSeconds = 86400);
+DSM_API std::vector<std::string> staleTemporaries(const std::string& path, std::int64_t minimumAgeSeconds = 86400);
 
 /// Removes staleTemporaries(path, minimumAgeSeconds); returns how many were
 /// removed. Never throws: a temporary that cannot be removed is left.
-std::size_t removeStaleTemporaries(const std::string& path, std::int64_t minimumAgeSeconds = 86400);
+DSM_API std::size_t removeStaleTemporaries(const std::string& path, std::int64_t minimumAgeSeconds = 86400);
 
 /// An output being written. The constructor checks the path (checkOutputPath)
 /// and creates the temporary `.NAME.tmp-XXXXXX` beside it (plus `suffix`, for
@@ -44,7 +46,10 @@ std::size_t removeStaleTemporaries(const std::string& path, std::int64_t minimum
 /// through write() / writeAt(), or let another library write
 /// temporaryPath() by name. commit() makes it the file `path`; destroying an
 /// OutputFile that was not committed removes the temporary.
-class OutputFile {
+///
+/// Thread safety: not thread-safe; calls on one OutputFile must not overlap.
+/// Separate OutputFiles (to different paths) are independent.
+class DSM_API OutputFile {
 public:
     explicit OutputFile(std::string path, std::string_view suffix = {});
     ~OutputFile();
@@ -82,4 +87,4 @@ private:
     bool committed_ = false;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

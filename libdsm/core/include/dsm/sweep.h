@@ -3,12 +3,13 @@
 #pragma once
 
 #include <optional>
-#include <span>
 
+#include "dsm/span.h"
+#include "dsm/version.h"
 #include "dsm/vertex_sink.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// Streams V(z) = sum_k w_k tau_k(z) / sum_k w_k into `sink`, in z order.
 ///
@@ -31,7 +32,7 @@ namespace dsm {
 ///
 /// Returns the depth of the vertex the sink refused, or nothing when the sink
 /// took every vertex.
-std::optional<float> sweep(std::span<const VisibilityFunction> inputs, std::span<const double> weights,
+DSM_API std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
                            int channels, VertexSink& sink);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

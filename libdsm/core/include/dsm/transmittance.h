@@ -3,11 +3,12 @@
 
 #include <array>
 #include <limits>
-#include <span>
 
+#include "dsm/span.h"
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// A surface crossed by the ray: depth and opacity per channel in [0, 1]. For a
 /// monochrome ray only opacity[0] is used.
@@ -26,8 +27,8 @@ struct VolumeSample {
 
 /// Everything one sample ray met, in any order; transmittance() sorts a copy.
 struct SampleRay {
-    std::span<const SurfaceHit> hits;
-    std::span<const VolumeSample> volume;
+    Span<const SurfaceHit> hits;
+    Span<const VolumeSample> volume;
 };
 
 /// Builds the transmittance function tau(z) = tau_s(z) * tau_v(z) of one ray.
@@ -49,7 +50,7 @@ struct SampleRay {
 /// Throws dsm::Error naming the hit or sample index and the bad value for
 /// non-finite or negative depths, opacities outside [0, 1] and non-finite or
 /// negative extinction.
-VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts,
+DSM_API VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts,
                                  float zStart = -std::numeric_limits<float>::infinity());
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -3,8 +3,10 @@
 
 #include <array>
 
-namespace dsm {
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 using Vec3 = std::array<double, 3>;
 
-}  // namespace dsm
+DSM_NAMESPACE_END

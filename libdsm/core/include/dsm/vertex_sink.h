@@ -4,13 +4,17 @@
 
 #include <cstdint>
 
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// Receives vertices one at a time in z order. Values are double so that the
 /// consumer decides how to round to the stored float32.
-class VertexSink {
+///
+/// Thread safety: a sink receives one stream from one producer; libdsm's sinks
+/// are not thread-safe, and a producer calls push() from one thread at a time.
+class DSM_API VertexSink {
 public:
     virtual ~VertexSink() = default;
     /// Takes vertex (z, values[0..channels)) carrying `count` samples. Returns
@@ -19,8 +23,9 @@ public:
 };
 
 /// A sink that stores every vertex it is given, rounded to float, unchanged
-/// otherwise. Used for uncompressed functions and as a test oracle.
-class CollectingSink final : public VertexSink {
+/// otherwise. Used for uncompressed functions and as a test oracle. Not
+/// thread-safe: it appends to `out`, which must outlive it.
+class DSM_API CollectingSink final : public VertexSink {
 public:
     explicit CollectingSink(VisibilityFunction& out) : out_(out) {}
     bool push(float z, const double* values, std::uint32_t count) override;
@@ -29,4 +34,4 @@ private:
     VisibilityFunction& out_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

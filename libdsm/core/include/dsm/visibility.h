@@ -4,10 +4,12 @@
 
 #include <cstddef>
 #include <cstdint>
-#include <span>
 #include <vector>
 
-namespace dsm {
+#include "dsm/span.h"
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 /// Largest channel count: a function is monochrome (1) or RGB (3).
 inline constexpr int kMaxChannels = 3;
@@ -18,14 +20,17 @@ class VisibilityFunction;
 /// VisibilityFunction, or a pixel of a decoded tile). Same representation and
 /// the same evaluation rules as VisibilityFunction, which documents them. Cheap
 /// to copy; valid while the arrays it views are.
-class VisibilityView {
+///
+/// Thread safety: a view is immutable; any number of threads may read one (and
+/// the arrays it views) at once, as long as nobody modifies those arrays.
+class DSM_API VisibilityView {
 public:
     VisibilityView() = default;
     /// `values` holds z.size() * channels floats, vertex-major; `counts` is
     /// empty or holds one count per vertex; `layerStarts` holds the first
     /// vertex of layers 1, 2, ... (empty for a single layer).
-    VisibilityView(std::span<const float> z, std::span<const float> values, std::span<const std::uint32_t> counts,
-                   int channels, std::span<const std::uint32_t> layerStarts = {})
+    VisibilityView(Span<const float> z, Span<const float> values, Span<const std::uint32_t> counts,
+                   int channels, Span<const std::uint32_t> layerStarts = {})
         : z_(z), v_(values), count_(counts), layerStarts_(layerStarts), channels_(channels) {}
 
     int channels() const { return channels_; }
@@ -39,10 +44,10 @@ public:
     }
     const float* values(std::size_t i) const { return v_.data() + i * static_cast<std::size_t>(channels_); }
     std::uint32_t count(std::size_t i) const { return count_.empty() ? 0u : count_[i]; }
-    std::span<const float> depths() const { return z_; }
-    std::span<const float> allValues() const { return v_; }
-    std::span<const std::uint32_t> counts() const { return count_; }
-    std::span<const std::uint32_t> layerStarts() const { return layerStarts_; }
+    Span<const float> depths() const { return z_; }
+    Span<const float> allValues() const { return v_; }
+    Span<const std::uint32_t> counts() const { return count_; }
+    Span<const std::uint32_t> layerStarts() const { return layerStarts_; }
 
     std::size_t layerCount() const { return layerStarts_.size() + 1; }
     std::size_t layerBegin(std::size_t layer) const { return layer == 0 ? 0 : layerStarts_[layer - 1]; }
@@ -65,10 +70,10 @@ public:
     VisibilityFunction toFunction(bool withCounts = true) const;
 
 private:
-    std::span<const float> z_;
-    std::span<const float> v_;
-    std::span<const std::uint32_t> count_;
-    std::span<const std::uint32_t> layerStarts_;
+    Span<const float> z_;
+    Span<const float> v_;
+    Span<const std::uint32_t> count_;
+    Span<const std::uint32_t> layerStarts_;
     int channels_ = 1;
 };
 
@@ -101,7 +106,12 @@ private:
 ///   light-centre visibility of a layered function is layer 0, and 0 at and
 ///   beyond the depth of layer 0's last vertex (the layer ended because all light
 ///   was blocked there, within the compression tolerance).
-class VisibilityFunction {
+///
+/// Thread safety: as for a standard container. Const members may be called
+/// from any number of threads at once; a modifying member (append, beginLayer,
+/// clear, assignment, ...) needs the caller to make sure no other thread uses
+/// the function, or a view of it, at the same time.
+class DSM_API VisibilityFunction {
 public:
     /// An empty function (V = 1 everywhere) with `channels` (1 or 3) values
     /// per vertex and, when `withCounts`, a sample count per vertex.
@@ -123,10 +133,10 @@ public:
     /// Sum of all counts (0 without counts).
     std::uint64_t totalCount() const;
 
-    std::span<const float> depths() const { return z_; }
+    Span<const float> depths() const { return z_; }
     /// All values, vertex-major: vertex i channel c at [i * channels() + c].
-    std::span<const float> allValues() const { return v_; }
-    std::span<const std::uint32_t> counts() const { return count_; }
+    Span<const float> allValues() const { return v_; }
+    Span<const std::uint32_t> counts() const { return count_; }
 
     /// Number of layers, at least 1.
     std::size_t layerCount() const { return layerBegin_.size() + 1; }
@@ -174,7 +184,12 @@ public:
     VisibilityView view() const { return VisibilityView(z_, v_, count_, channels_, layerBegin_); }
     operator VisibilityView() const { return view(); }
 
-    friend bool operator==(const VisibilityFunction&, const VisibilityFunction&) = default;
+    /// Same channels, counts flag, vertices and layers.
+    friend bool operator==(const VisibilityFunction& a, const VisibilityFunction& b) {
+        return a.channels_ == b.channels_ && a.withCounts_ == b.withCounts_ && a.z_ == b.z_ && a.v_ == b.v_ &&
+               a.count_ == b.count_ && a.layerBegin_ == b.layerBegin_;
+    }
+    friend bool operator!=(const VisibilityFunction& a, const VisibilityFunction& b) { return !(a == b); }
 
 private:
 
@@ -189,9 +204,10 @@ private:
 /// Coherent evaluation (Lokovic & Veach §3.4): remembers the segment of the
 /// previous query and searches linearly forward or backward from it, so a run
 /// of lookups at nearby depths costs O(1) each. Same results as
-/// VisibilityFunction::evaluate. One cursor per thread; the function must
-/// outlive it and not change while it is used.
-class VisibilityCursor {
+/// VisibilityFunction::evaluate. Not thread-safe (evaluation moves the cursor):
+/// one cursor per thread. The function must outlive it and not change while
+/// it is used.
+class DSM_API VisibilityCursor {
 public:
     explicit VisibilityCursor(const VisibilityView& function) : function_(function) {}
     /// Starts the search at `position` (a value of position() from an earlier
@@ -213,4 +229,4 @@ private:
     std::uint64_t steps_ = 0;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -4,20 +4,22 @@
 #pragma once
 
 #include <cstddef>
-#include <span>
+#include <optional>
 
+#include "dsm/span.h"
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct VisibilityProductOptions {
     /// L-infinity tolerance epsilon >= 0 of the recompression (compressor.h).
     double tolerance = 0.0;
     /// Largest chord error allowed per pairwise product, where both factors
-    /// change along one segment and the exact product there is quadratic.
-    /// Negative means tolerance / 16, but at least 2^-20 (so that a tolerance
-    /// of 0 does not ask for unbounded subdivision).
-    double maxInterpolationError = -1.0;
+    /// change along one segment and the exact product there is quadratic:
+    /// finite and > 0. Unset (automatic) means tolerance / 16, but at least
+    /// 2^-20 (so that a tolerance of 0 does not ask for unbounded subdivision).
+    std::optional<double> maxInterpolationError;
     /// Keep sample counts: a vertex's count is the sum of the factors' counts
     /// that fall in its segment. Factors without counts contribute 0.
     bool keepCounts = false;
@@ -40,7 +42,7 @@ struct VisibilityProductOptions {
     /// last layer (a build would have begun another); one that used its whole
     /// budget may hide more there, unknown, so the product's layers stop where
     /// a restart would need what lies behind it.
-    std::span<const int> factorLayers;
+    Span<const int> factorLayers;
 };
 
 struct VisibilityProduct {
@@ -74,7 +76,7 @@ struct VisibilityProduct {
 /// Factors must be valid (VisibilityView::validate) and have 1 or 3 channels.
 /// No factors gives an empty function. Throws dsm::Error for an option out of
 /// range (tolerance, interpolation error, maxLayers).
-VisibilityProduct multiplyVisibility(std::span<const VisibilityView> factors,
+DSM_API VisibilityProduct multiplyVisibility(Span<const VisibilityView> factors,
                                      const VisibilityProductOptions& options = {});
 
-}  // namespace dsm
+DSM_NAMESPACE_END

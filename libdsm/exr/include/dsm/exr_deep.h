@@ -10,9 +10,10 @@
 #include <vector>
 
 #include "dsm/map_info.h"
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// One deep EXR sample seen from the light ("Interpreting OpenEXR Deep
 /// Pixels"). zBack <= z makes a point sample at z; zBack > z a volume sample
@@ -31,7 +32,7 @@ struct DeepSample {
 /// from v0 to v1 (0 <= v1 <= v0 <= 1): a linear segment of a map against the
 /// volume sample of alpha 1 - v1/v0 that replaces it, and the other way round.
 /// Equals v0 * g(v1 / v0) with g(1) = 0, g(r) ~ ln(r)^2 / 8 near 1, g(0) = 1.
-double exponentialDeviation(double v0, double v1);
+DSM_API double exponentialDeviation(double v0, double v1);
 
 /// The samples that represent a visibility function in a deep EXR: one point
 /// sample per vertical step (including the drop from V = 1 at the first
@@ -45,7 +46,7 @@ double exponentialDeviation(double v0, double v1);
 /// and alpha the mean visibility: 1 - alpha = mean(V after) / mean(V before).
 /// The product of (1 - alpha) over all samples is V at the last vertex.
 /// Throws dsm::Error when maxDeviation is not positive.
-std::vector<DeepSample> deepSamplesFromVisibility(const VisibilityView& function, double maxDeviation);
+DSM_API std::vector<DeepSample> deepSamplesFromVisibility(const VisibilityView& function, double maxDeviation);
 
 /// The transmittance of deep samples in any order (messy or tidy: the result
 /// is that of the tidy image "Interpreting OpenEXR Deep Pixels" defines, the
@@ -56,7 +57,7 @@ std::vector<DeepSample> deepSamplesFromVisibility(const VisibilityView& function
 /// front (EXR leaves T = 1 at exactly z, 0 just after). Not compressed.
 /// Throws dsm::Error naming the sample index for a depth that is negative or
 /// not finite, or an alpha outside [0, 1].
-VisibilityFunction visibilityFromDeepSamples(std::span<const DeepSample> samples, int channels,
+DSM_API VisibilityFunction visibilityFromDeepSamples(std::span<const DeepSample> samples, int channels,
                                              double maxLinearError);
 
 /// Standard OpenEXR camera attributes for a light camera (Imath row-vector
@@ -68,13 +69,13 @@ struct StandardCameraMatrices {
     std::array<std::array<float, 4>, 4> worldToCamera{};
     std::array<std::array<float, 4>, 4> worldToNDC{};
 };
-StandardCameraMatrices standardCameraMatrices(const LightCamera& camera);
+DSM_API StandardCameraMatrices standardCameraMatrices(const LightCamera& camera);
 
 /// The light camera described by worldToCamera and worldToNDC (the inverse of
 /// standardCameraMatrices, up to float precision; nearPlane 0). Throws
 /// dsm::Error when worldToCamera is singular or worldToNDC is not a
 /// perspective or orthographic projection along the camera's z axis.
-LightCamera cameraFromStandardMatrices(const std::array<std::array<double, 4>, 4>& worldToCamera,
+DSM_API LightCamera cameraFromStandardMatrices(const std::array<std::array<double, 4>, 4>& worldToCamera,
                                        const std::array<std::array<double, 4>, 4>& worldToNDC);
 
 /// The smallest bound accepted for ExrExportOptions::maxDeviation and
@@ -93,10 +94,10 @@ struct ExrExportOptions {
     /// Tile edge of a tiled EXR.
     std::uint32_t tileSize = 64;
     /// Bound on |T_exr(z) - V(z)| from the exponential interpretation of volume
-    /// samples. 0 chooses clamp(tolerance / 2, 1e-5, 1e-3) from the exported
-    /// level's tolerance; otherwise in [kMinExrErrorBound, 1] (NaN and values
-    /// outside are refused with ErrorCode::argument).
-    double maxDeviation = 0.0;
+    /// samples. Unset (automatic) chooses clamp(tolerance / 2, 1e-5, 1e-3) from
+    /// the exported level's tolerance; a value must lie in [kMinExrErrorBound,
+    /// 1] (NaN and values outside are refused with ErrorCode::argument).
+    std::optional<double> maxDeviation;
 };
 
 struct ExrExportReport {
@@ -122,31 +123,32 @@ struct ExrExportReport {
 /// exact dsm:* attributes (spec/exr-interop.md). Written to a temporary file
 /// beside `exrPath` and renamed into place: on failure no file is left.
 /// Throws dsm::Error naming the file, level or pixel.
-ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
+DSM_API ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
                               const ExrExportOptions& options = {});
 
 struct ExrImportOptions {
-    /// Compression tolerance. < 0 uses the file's dsm:tolerance when present,
-    /// else kDefaultExrImportTolerance; NaN and infinity are refused.
-    double tolerance = -1.0;
-    /// Bound on the linearisation of exponential volume samples. <= 0 uses
-    /// clamp(tolerance / 4, 1e-5, 1e-3); otherwise in [kMinExrErrorBound, 1]
-    /// (NaN and values outside are refused with ErrorCode::argument).
-    double maxLinearError = 0.0;
+    /// Compression tolerance, finite and >= 0. Unset (automatic) uses the
+    /// file's dsm:tolerance when present, else kDefaultExrImportTolerance.
+    std::optional<double> tolerance;
+    /// Bound on the linearisation of exponential volume samples. Unset
+    /// (automatic) uses clamp(tolerance / 4, 1e-5, 1e-3); a value must lie in
+    /// [kMinExrErrorBound, 1] (NaN and values outside are refused with
+    /// ErrorCode::argument).
+    std::optional<double> maxLinearError;
     /// The light camera; when empty it comes from the file (dsm:* attributes,
     /// else worldToCamera and worldToNDC).
     std::optional<LightCamera> camera;
-    /// When > 0 (and no `camera`): a perspective light with this horizontal
-    /// field of view in degrees (0..180), square pixels, centred; its
+    /// When set (and no `camera`): a perspective light with this horizontal
+    /// field of view in degrees, in (0, 180), square pixels, centred; its
     /// worldToLight from the file's worldToCamera, else the identity.
-    double fieldOfView = 0.0;
-    /// When > 0 (and no `camera` or fieldOfView): an orthographic light with a
-    /// window this wide in light units, square pixels, centred; worldToLight as
-    /// for fieldOfView.
-    double orthoWidth = 0.0;
+    std::optional<double> fieldOfView;
+    /// When set (and no `camera` or fieldOfView): an orthographic light with a
+    /// window this wide in light units (finite, > 0), square pixels, centred;
+    /// worldToLight as for fieldOfView.
+    std::optional<double> orthoWidth;
     std::uint32_t tileSize = 32;
-    /// As WriterOptions::mipLevels (0 = full pyramid).
-    unsigned mipLevels = 0;
+    /// As WriterOptions::mipLevels (unset = full pyramid).
+    std::optional<unsigned> mipLevels;
     int zlibLevel = 6;
 };
 
@@ -173,7 +175,7 @@ struct ExrImportReport {
 /// when AR, AG and AB are all present. Pixels outside the data window are
 /// empty. Throws dsm::Error naming the file (and pixel) when it is not a deep
 /// EXR, has no Z or alpha channel, holds invalid samples, or has no camera.
-ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
+DSM_API ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
                               const ExrImportOptions& options = {});
 
-}  // namespace dsm
+DSM_NAMESPACE_END

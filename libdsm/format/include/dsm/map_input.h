@@ -8,12 +8,14 @@
 #include <memory>
 #include <string>
 
-namespace dsm {
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 /// A read-only, random-access source of a map's bytes. The reader calls read()
 /// from any number of threads at once (tiles load in parallel), so an
 /// implementation must be thread-safe; it lives as long as the map it opened.
-class MapInput {
+class DSM_API MapInput {
 public:
     virtual ~MapInput() = default;
 
@@ -33,4 +35,4 @@ public:
     static std::shared_ptr<const MapInput> memory(const void* data, std::size_t size);
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

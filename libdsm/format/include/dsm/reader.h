@@ -8,9 +8,10 @@
 #include "dsm/map_info.h"
 #include "dsm/map_input.h"
 #include "dsm/tile_cache.h"
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// Limits for untrusted files, checked before anything is allocated.
 struct ReaderOptions {
@@ -24,16 +25,23 @@ struct ReaderOptions {
     std::shared_ptr<TileCache> cache;
 };
 
-/// One pixel's function, kept alive with the tile that holds it.
-class PixelFunction {
+class ImplAccess;
+
+/// One pixel's function, kept alive with the tile that holds it: the view stays
+/// valid for as long as this object (or a copy) lives, whatever the cache does.
+/// Made by DeepShadowMap::pixel(); a default-constructed one views an empty
+/// function (V = 1). Copies may be used from any thread.
+class DSM_API PixelFunction {
 public:
     PixelFunction() = default;
-    PixelFunction(std::shared_ptr<const void> tile, VisibilityView view) : tile_(std::move(tile)), view_(view) {}
     const VisibilityView& view() const { return view_; }
     const VisibilityView* operator->() const { return &view_; }
 
 private:
-    std::shared_ptr<const void> tile_;
+    friend class ImplAccess;
+    struct TileOwner;  // opaque: the decoded tile that holds the viewed arrays
+    PixelFunction(std::shared_ptr<const TileOwner> tile, VisibilityView view) : tile_(std::move(tile)), view_(view) {}
+    std::shared_ptr<const TileOwner> tile_;
     VisibilityView view_;
 };
 
@@ -55,7 +63,7 @@ struct TileSummary {
 /// through the cache. Thread-safe: any number of threads may read pixels at
 /// once. Every problem with the file throws dsm::Error naming the file and,
 /// where known, level, tile and pixel.
-class DeepShadowMap {
+class DSM_API DeepShadowMap {
 public:
     static std::shared_ptr<DeepShadowMap> open(const std::string& path, const ReaderOptions& options = {});
     /// Opens a map from memory or the caller's reads (see MapInput); `name` is
@@ -75,10 +83,9 @@ public:
     /// Directory entry of tile (tx, ty) of a level.
     TileSummary tile(unsigned level, std::uint32_t tx, std::uint32_t ty) const;
 
-    struct Impl;
-    const Impl& impl() const { return *impl_; }
-
 private:
+    friend class ImplAccess;
+    struct Impl;
     DeepShadowMap();
     std::unique_ptr<Impl> impl_;
 };
@@ -88,8 +95,9 @@ private:
 /// its layout, every function's invariants (depth order, value range,
 /// monotonicity, counts) and the directory's totals. Throws dsm::Error naming
 /// the file, level, tile and pixel of the first problem.
-void validate(const std::string& path, const ReaderOptions& options = {});
+DSM_API void validate(const std::string& path, const ReaderOptions& options = {});
 /// validate() for a map read through a MapInput; `name` is what messages quote.
-void validate(std::shared_ptr<const MapInput> input, const std::string& name, const ReaderOptions& options = {});
+DSM_API void validate(std::shared_ptr<const MapInput> input, const std::string& name,
+                      const ReaderOptions& options = {});
 
-}  // namespace dsm
+DSM_NAMESPACE_END

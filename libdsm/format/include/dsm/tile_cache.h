@@ -7,7 +7,11 @@
 #include <cstdint>
 #include <memory>
 
-namespace dsm {
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
+
+class ImplAccess;
 
 /// Counters of a TileCache. Plain values, copied out by TileCache::stats().
 struct TileCacheStats {
@@ -29,7 +33,7 @@ struct TileCacheStats {
 ///
 /// Create one with TileCache::create() and pass it to every map you open;
 /// maps opened without one share a process-wide cache (see defaultCache()).
-class TileCache {
+class DSM_API TileCache {
 public:
     /// A cache that keeps at most `budgetBytes` of decoded tiles (plus one tile).
     static std::shared_ptr<TileCache> create(std::size_t budgetBytes);
@@ -51,13 +55,12 @@ public:
     /// Drops every tile the cache holds (tiles handed out stay valid).
     void clear();
 
-    /// Internal interface used by the map reader (src/tile_cache_impl.h).
-    struct Impl;
-    Impl& impl() { return *impl_; }
-
 private:
+    friend class ImplAccess;
+    /// What the map reader uses: src/tile_cache_impl.h.
+    struct Impl;
     explicit TileCache(std::size_t budgetBytes);
     std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -3,13 +3,15 @@
 
 #include <cstdint>
 #include <memory>
-#include <span>
+#include <optional>
 #include <string>
 
 #include "dsm/map_info.h"
+#include "dsm/span.h"
+#include "dsm/version.h"
 #include "dsm/visibility.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct WriterOptions {
     std::uint32_t width = 0;
@@ -27,9 +29,9 @@ struct WriterOptions {
     double filterWidth = 1.0;
     /// Tolerance epsilon the level-0 functions were compressed with (recorded).
     double tolerance = 0.0;
-    /// Mip levels to write: 0 = a full pyramid down to 1 x 1, 1 = no mip-maps,
-    /// N = the first N levels (capped at the full count).
-    unsigned mipLevels = 0;
+    /// Mip levels to write, >= 1: 1 = no mip-maps, N = the first N levels
+    /// (capped at the full count). Unset (automatic): a full pyramid down to 1 x 1.
+    std::optional<unsigned> mipLevels;
     /// Each coarser level is recompressed with the previous tolerance times
     /// this factor (Lokovic & Veach §5.3 halve it: total error <= 2 epsilon).
     double levelToleranceFactor = 0.5;
@@ -49,7 +51,16 @@ struct WriterOptions {
 /// beside `path`, synced and renamed to `path` by finish(). If finish() is not
 /// reached (an error, an exception, a crash) no file named `path` is created
 /// or replaced; the destructor removes the temporary file.
-class MapWriter {
+///
+/// Thread safety: not thread-safe; calls on one writer must not overlap
+/// (writeTile builds coarser levels and appends to the file). A producer that
+/// computes tiles on several threads hands them to the writer one at a time,
+/// in any order. Separate writers (to different paths) are independent.
+///
+/// Failure: every error throws dsm::Error naming the file, tile and pixel as
+/// known; after a failure of writeTile() or finish() the writer is unusable,
+/// and its destructor removes the temporary file.
+class DSM_API MapWriter {
 public:
     /// Opens the temporary file. Throws dsm::Error for bad options or I/O.
     MapWriter(const std::string& path, const WriterOptions& options);
@@ -67,7 +78,7 @@ public:
     /// Level-0 tile (tx, ty): tileWidth(tx) * tileHeight(ty) functions in row
     /// order. Each is validated; channels, counts and layers must fit the
     /// options. Throws dsm::Error naming tile and pixel.
-    void writeTile(std::uint32_t tx, std::uint32_t ty, std::span<const VisibilityFunction> pixels);
+    void writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels);
 
     /// Completes the pyramid, writes directories and metadata, and renames the
     /// file into place. Throws dsm::Error naming the first missing tile.
@@ -78,4 +89,4 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

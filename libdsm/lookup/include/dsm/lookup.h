@@ -5,13 +5,15 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 
 #include "dsm/error.h"
 #include "dsm/map_info.h"
 #include "dsm/reader.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 struct LookupOptions {
     /// Filter shape. All are separable over pixel centres; a pixel's weight is
@@ -25,11 +27,11 @@ struct LookupOptions {
     /// Filter width in level-0 pixels. The smallest useful width (1 for the box,
     /// 2 for the others) is used when a smaller one is asked for.
     double filterWidth = 1.0;
-    /// Mip level: -1 chooses from the filter width so that the footprint spans
-    /// 1-2 of the smallest width at the chosen level, and blends the two nearest
-    /// levels linearly (trilinear mip-mapping). >= 0 uses that level only
-    /// (clamped to the coarsest), with the width scaled to it.
-    int level = -1;
+    /// Mip level. Unset (automatic) chooses from the filter width so that the
+    /// footprint spans 1-2 of the smallest width at the chosen level, and blends
+    /// the two nearest levels linearly (trilinear mip-mapping). A level uses that
+    /// level only (clamped to the coarsest), with the width scaled to it.
+    std::optional<unsigned> level;
     /// Subtracted from the query depth, against self-shadowing (light units).
     double bias = 0.0;
 };
@@ -62,7 +64,7 @@ struct LookupFailure {
 /// Points outside the map (or behind a perspective light) are lit: V = 1.
 /// Pixels of the footprint that fall outside the image are left out and the
 /// weights of the others renormalised.
-class LookupContext {
+class DSM_API LookupContext {
 public:
     explicit LookupContext(std::shared_ptr<const DeepShadowMap> map);
     ~LookupContext();
@@ -96,4 +98,4 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

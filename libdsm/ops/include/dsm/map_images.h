@@ -9,12 +9,13 @@
 #include <vector>
 
 #include "dsm/reader.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// A width x height image of `channels` floats per pixel, row by row from the
 /// top (raster y down, as in the map), channels interleaved.
-struct FloatImage {
+struct DSM_API FloatImage {
     std::uint32_t width = 0;
     std::uint32_t height = 0;
     int channels = 1;
@@ -37,17 +38,17 @@ struct FloatImage {
 /// A monochrome pixel of an RGB map gives the same value in R, G and B.
 /// Reads every tile of the level. Throws dsm::Error naming the file when the
 /// level does not exist or a tile cannot be read, and when z is NaN.
-FloatImage visibilitySlice(const DeepShadowMap& map, unsigned level, double z);
+DSM_API FloatImage visibilitySlice(const DeepShadowMap& map, unsigned level, double z);
 
 /// Opacity 1 - V(infinity) of every pixel of a level: how much light the pixel
 /// stops in total, per channel of the map (0 for an empty pixel). For layered
 /// (MTSM) pixels this is 1, as the light-centre function ends in 0.
 /// Same reading and failures as visibilitySlice().
-FloatImage opacityImage(const DeepShadowMap& map, unsigned level);
+DSM_API FloatImage opacityImage(const DeepShadowMap& map, unsigned level);
 
 /// Vertices stored per pixel of a level, all layers together, as one channel
 /// (exact as float up to 2^24). Same reading and failures as visibilitySlice().
-FloatImage vertexCountImage(const DeepShadowMap& map, unsigned level);
+DSM_API FloatImage vertexCountImage(const DeepShadowMap& map, unsigned level);
 
 /// Distribution of vertices per pixel over every pixel of a level, empty
 /// pixels (0 vertices) included.
@@ -75,6 +76,6 @@ struct VertexHistogram {
 
 /// The histogram of a level. Reads every tile of the level; same failures as
 /// visibilitySlice().
-VertexHistogram vertexHistogram(const DeepShadowMap& map, unsigned level);
+DSM_API VertexHistogram vertexHistogram(const DeepShadowMap& map, unsigned level);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -4,10 +4,13 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
-namespace dsm {
+#include "dsm/version.h"
+
+DSM_NAMESPACE_BEGIN
 
 enum class MergeMode : std::uint8_t {
     /// Per pixel and channel, the visibilities multiply (light passing two
@@ -32,16 +35,17 @@ enum class MergeMode : std::uint8_t {
 
 struct MergeOptions {
     MergeMode mode = MergeMode::Product;
-    /// Product: the level-0 recompression tolerance; negative = the largest
-    /// level-0 tolerance of the inputs. Ignored by Stitch (it keeps the inputs').
-    double tolerance = -1.0;
+    /// Product: the level-0 recompression tolerance, finite and >= 0; unset
+    /// (automatic) = the largest level-0 tolerance of the inputs. Ignored by
+    /// Stitch (it keeps the inputs').
+    std::optional<double> tolerance;
     /// Product: the largest chord error per pairwise product (see
-    /// VisibilityProductOptions); negative = tolerance / 16, at least 2^-20.
-    double maxInterpolationError = -1.0;
-    /// zlib level 0..9 of the output; negative = Product: 6; Stitch: the level
-    /// the inputs' tiles were written with (found by re-encoding a few of
-    /// them), 6 when none can be recognised.
-    int zlibLevel = -1;
+    /// VisibilityProductOptions); unset = tolerance / 16, at least 2^-20.
+    std::optional<double> maxInterpolationError;
+    /// zlib level 0..9 of the output; unset (automatic) = Product: 6; Stitch:
+    /// the level the inputs' tiles were written with (found by re-encoding a
+    /// few of them), 6 when none can be recognised.
+    std::optional<int> zlibLevel;
 };
 
 struct MergeReport {
@@ -70,6 +74,6 @@ struct MergeReport {
 /// fit together, the differing field with both values; for Stitch regions
 /// that overlap or leave holes, the overlapping pairs with their rectangles or
 /// the uncovered rectangles. The output may not be one of the inputs.
-MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string& output, const MergeOptions& options);
+DSM_API MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string& output, const MergeOptions& options);
 
-}  // namespace dsm
+DSM_NAMESPACE_END

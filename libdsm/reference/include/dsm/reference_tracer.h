@@ -11,8 +11,9 @@
 #include <optional>
 
 #include "dsm/scene.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// Settings of a ReferenceTracer.
 struct ReferenceTracerOptions {
@@ -61,7 +62,7 @@ struct RayHit {
 /// beyond the positions, curves short of points, a singular transform), the
 /// density field's error for an unreadable VDB file, and Embree's message for
 /// any Embree device error.
-class ReferenceTracer {
+class DSM_API ReferenceTracer {
 public:
     explicit ReferenceTracer(const Scene& scene, const ReferenceTracerOptions& options = {});
     ~ReferenceTracer();
@@ -106,4 +107,4 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -2,22 +2,24 @@
 // query traces (Xie et al. 2007 §4, §6.2; Curtis 2009 §3.1).
 #pragma once
 
+#include <array>
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include "dsm/map_info.h"
 #include "dsm/vec3.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 enum class AreaLightShape : std::uint8_t { Disk = 0, Rectangle = 1 };
 
 /// A light's shape and half-sizes.
-struct AreaLightSize {
+struct DSM_API AreaLightSize {
     AreaLightShape shape = AreaLightShape::Disk;
     double halfWidth = 0.0;
     double halfHeight = 0.0;
-
 };
 
 /// A flat light centred on the light axis of a perspective map, in the plane
@@ -46,19 +48,22 @@ struct AreaLightSize {
 ///   random numbers are seeded by the receiver point's bits and `seed`, so a
 ///   receiver always gets the same samples (images do not crawl) and the
 ///   reference tracer can trace exactly the rays the map query traces.
-class AreaLight {
+///
+/// Thread safety: immutable once made; every const member may be called from
+/// any number of threads at once.
+class DSM_API AreaLight {
 public:
-    /// A disk of `radius` > 0. `planeDepth` < 0 derives the push-back from
-    /// `camera` for this radius. Throws dsm::Error when the camera is not
+    /// A disk of `radius` > 0. Without `planeDepth` the push-back is derived
+    /// from `camera` for this radius. Throws dsm::Error when the camera is not
     /// perspective, does not contain its own axis, or the light does not fit
     /// inside the map's frustum at its plane (the map was built for a smaller
     /// light, or without `area_radius`).
-    static AreaLight disk(const LightCamera& camera, double radius, double planeDepth = -1.0);
+    static AreaLight disk(const LightCamera& camera, double radius, std::optional<double> planeDepth = std::nullopt);
     /// A rectangle with half-sizes along light-space x and y, both > 0. The
     /// derived push-back is the smallest that fits it:
     /// max(halfWidth / min(xmax, -xmin), halfHeight / min(ymax, -ymin)).
     static AreaLight rectangle(const LightCamera& camera, double halfWidth, double halfHeight,
-                               double planeDepth = -1.0);
+                               std::optional<double> planeDepth = std::nullopt);
 
     /// A light of the given shape and half-sizes for a map, placed where the
     /// map's build put its light: the plane depth follows from the area-light
@@ -102,7 +107,7 @@ public:
 private:
     AreaLight() = default;
     static AreaLight make(const LightCamera& camera, AreaLightShape shape, double halfWidth, double halfHeight,
-                          double planeDepth);
+                          std::optional<double> planeDepth);
 
     LightCamera camera_;
     AreaLightShape shape_ = AreaLightShape::Disk;
@@ -112,4 +117,4 @@ private:
     std::array<double, 12> lightToWorld_{};  // row-major 3x4
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

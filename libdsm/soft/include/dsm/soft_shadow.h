@@ -7,12 +7,14 @@
 #include <array>
 #include <cstdint>
 #include <memory>
+#include <optional>
 
 #include "dsm/area_light.h"
 #include "dsm/lookup.h"
 #include "dsm/reader.h"
+#include "dsm/version.h"
 
-namespace dsm {
+DSM_NAMESPACE_BEGIN
 
 /// How a light ray that crosses estimated samples loses visibility. Segment i
 /// of a layer (from vertex i-1 to vertex i) holds count_i samples that
@@ -38,10 +40,10 @@ enum class SampleAttenuation : std::uint8_t {
 struct SoftShadowOptions {
     /// N >= 1 light samples (rays) per receiver, stratified (AreaLight).
     int samples = 64;
-    /// K: the map layers used, 1 .. the map's maxLayers; 0 = all of them.
-    /// Larger values are clamped to the map's. K = 1 ignores every occluder
-    /// hidden from the light centre behind a fully opaque one (Xie §6.2).
-    int layers = 0;
+    /// K: the map layers used, >= 1; unset uses all of them. Values above the
+    /// map's maxLayers are clamped to it. K = 1 ignores every occluder hidden
+    /// from the light centre behind a fully opaque one (Xie §6.2).
+    std::optional<int> layers;
     /// Xie §6.1 "z threshold": a stored sample at depth z is hit by a ray whose
     /// depth range across the pixel meets [z - zThreshold, z + zThreshold].
     /// Light-space depth units (camera space, not the non-linear screen z),
@@ -112,7 +114,7 @@ struct SoftShadowStats {
 /// reaches the tile and kept for the tracer's life (about 2.7 KB per 32 x 32
 /// tile; there is no eviction). Thread-safe: share one between threads, and
 /// give each thread a SoftShadowContext.
-class SoftShadowTracer {
+class DSM_API SoftShadowTracer {
 public:
     /// `light` must have been made for the map's light camera (throws
     /// dsm::Error otherwise, or when the map is empty).
@@ -126,10 +128,9 @@ public:
     /// Tiles whose depth mini-pyramids have been built so far.
     std::size_t hierarchyTilesBuilt() const;
 
-    struct Impl;
-    const Impl& impl() const { return *impl_; }
-
 private:
+    friend class ImplAccess;
+    struct Impl;
     std::unique_ptr<Impl> impl_;
 };
 
@@ -143,7 +144,7 @@ private:
 /// the light's plane plus the bias, is lit (v = 1, no rays).
 /// Throws dsm::Error for options out of range or a non-finite receiver, and
 /// passes on the reader's errors for a damaged file.
-class SoftShadowContext {
+class DSM_API SoftShadowContext {
 public:
     explicit SoftShadowContext(std::shared_ptr<const SoftShadowTracer> tracer);
     ~SoftShadowContext();
@@ -180,4 +181,4 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
-}  // namespace dsm
+DSM_NAMESPACE_END

@@ -1,0 +1,43 @@
+// Versions: of the library (from the build's project version) and of the .dsm
+// file format it reads and writes (spec/dsm-format.md); and the versioned
+// namespace every public declaration lives in.
+#pragma once
+
+#include <cstdint>
+
+#include "dsm/export.h"
+#include "dsm/library_version.h"
+
+/// Every public name is dsm::NAME, declared in the inline namespace
+/// dsm::vMAJOR: programs spell dsm::NAME, while the linker sees the major
+/// version, so that a program built against one major version of a shared
+/// libdsm fails to link against another instead of misbehaving.
+#define DSM_ABI_NAMESPACE_CONCAT_(prefix, major) prefix##major
+#define DSM_ABI_NAMESPACE_NAME_(prefix, major) DSM_ABI_NAMESPACE_CONCAT_(prefix, major)
+#define DSM_ABI_NAMESPACE DSM_ABI_NAMESPACE_NAME_(v, DSM_VERSION_MAJOR)
+#define DSM_NAMESPACE_BEGIN \
+    namespace dsm {         \
+    inline namespace DSM_ABI_NAMESPACE {
+#define DSM_NAMESPACE_END \
+    }                     \
+    }
+
+DSM_NAMESPACE_BEGIN
+
+/// The library version these headers belong to (DSM_VERSION_* as numbers).
+inline constexpr int kLibraryVersionMajor = DSM_VERSION_MAJOR;
+inline constexpr int kLibraryVersionMinor = DSM_VERSION_MINOR;
+inline constexpr int kLibraryVersionPatch = DSM_VERSION_PATCH;
+
+/// The library version the program runs with, "MAJOR.MINOR.PATCH" (with a
+/// shared libdsm it may differ from DSM_VERSION_STRING, the headers' version).
+/// Thread-safe; never fails.
+DSM_API const char* libraryVersion() noexcept;
+
+/// The .dsm format version this library writes. It reads every file of the
+/// same major version: minor versions only append fields, which it skips
+/// (spec/dsm-format.md, "Versioning").
+inline constexpr std::uint16_t kFormatVersionMajor = 1;
+inline constexpr std::uint16_t kFormatVersionMinor = 0;
+
+DSM_NAMESPACE_END
