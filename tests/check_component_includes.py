@@ -29,6 +29,8 @@ ALLOWED = {
     "reference": CORE_SIDE | {"build", "reference"},
     "c": CORE_SIDE | {"c"},
 }
+# Headers generated into the build tree at configure time, from libdsm/NAME.in.
+GENERATED = {"dsm/library_version.h": "core"}
 INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^">]+)[">]')
 SOURCES = {".h", ".hpp", ".c", ".cpp"}
 
@@ -44,6 +46,7 @@ def owners(library):
             public[header.name] = component
         for header in (component_dir / "src").glob("*.h"):
             private.setdefault(header.name, set()).add(component)
+    public.update(GENERATED)
     return public, private
 
 
