@@ -2,7 +2,9 @@
 // clamped to the cores, files that are not regular refused without a blocking
 // open, deep EXR headers checked against the file size before OpenEXR
 // allocates, and EXR error bounds refused below what float32 resolves.
+#include <dsm/build.h>
 #include <dsm/dsm.h>
+#include <dsm/exr.h>
 #include <gtest/gtest.h>
 
 #include <cstdint>
