@@ -607,7 +607,7 @@ TEST_F(CApi, EveryFailureReturnsACodeAndAMessage) {
     expectFailure(dsm_writer_open(out.c_str(), &wo, &writer), DSM_ERROR_ARGUMENT, "projection");
     wo.projection = DSM_PROJECTION_PERSPECTIVE;
     const std::string noDirectory = (dir_ / "no" / "such" / "dir.dsm").string();
-    expectFailure(dsm_writer_open(noDirectory.c_str(), &wo, &writer), DSM_ERROR_IO, "cannot create a temporary file");
+    expectFailure(dsm_writer_open(noDirectory.c_str(), &wo, &writer), DSM_ERROR_IO, "cannot write in the directory");
     ASSERT_EQ(dsm_writer_open(out.c_str(), &wo, &writer), DSM_OK);
     dsm_pixel_function f = DSM_PIXEL_FUNCTION_INIT;
     expectFailure(dsm_writer_set_pixel_function(writer, 4, 0, &f), DSM_ERROR_ARGUMENT,
