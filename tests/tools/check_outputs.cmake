@@ -8,7 +8,7 @@
 #         -DMAKE_SAMPLE_MAP=<make_sample_map> -DEXAMPLES_DIR=<examples/>
 #         -DWORK_DIR=<fresh dir> -P check_outputs.cmake
 #
-# Checks: stats_is_scene output_is_scene stats_is_output picture_is_map
+# Checks: stats_is_scene output_is_scene output_is_scene_file stats_is_output picture_is_map
 # convert_same_file stats_kept_on_failure checked_first stale_temporaries
 # full_disk.
 cmake_minimum_required(VERSION 3.25)
@@ -84,6 +84,20 @@ elseif(CHECK STREQUAL "output_is_scene")
     expect_unchanged("${SCENE}" "${SCENE_HASH}")
     expect_unchanged("${WORK_DIR}/${link}" "${SCENE_HASH}")
   endforeach()
+
+elseif(CHECK STREQUAL "output_is_scene_file")
+  # The map or the statistics would replace the OBJ mesh the scene reads.
+  file(COPY_FILE "${EXAMPLES_DIR}/cloud-and-pipes.json" "${WORK_DIR}/pipes-scene.json")
+  file(COPY_FILE "${EXAMPLES_DIR}/pipes.obj" "${WORK_DIR}/pipes.obj")
+  file(SHA256 "${WORK_DIR}/pipes.obj" OBJ_HASH)
+  run("${DSM_BUILD}" "${WORK_DIR}/pipes-scene.json" -o "${WORK_DIR}/pipes.obj" ${SMALL})
+  expect_rc(1)
+  expect_error_line("dsm-build: ERROR '${WORK_DIR}/pipes.obj': the output is also an input; write to another file")
+  expect_unchanged("${WORK_DIR}/pipes.obj" "${OBJ_HASH}")
+  run("${DSM_BUILD}" "${WORK_DIR}/pipes-scene.json" -o "${WORK_DIR}/out.dsm" --stats-json "${WORK_DIR}/pipes.obj" ${SMALL})
+  expect_rc(1)
+  expect_unchanged("${WORK_DIR}/pipes.obj" "${OBJ_HASH}")
+  expect_no_file("${WORK_DIR}/out.dsm")
 
 elseif(CHECK STREQUAL "stats_is_output")
   # Two outputs of one command naming one file: the statistics would replace the map.

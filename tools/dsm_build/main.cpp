@@ -234,11 +234,7 @@ int main(int argc, char** argv) {
         sceneOptions.maxBytes = maxSceneMiB << 20;
         const dsm::Scene scene = scenePath == "-" ? dsm::readScene(std::cin, ".", "<stdin>", sceneOptions)
                                                   : dsm::loadScene(scenePath, sceneOptions);
-        std::vector<std::string> volumeFiles;
-        for (const dsm::SceneObject& object : scene.objects)
-            if (const auto* volume = std::get_if<dsm::Volume>(&object.geometry))
-                if (const auto* vdb = std::get_if<dsm::VdbDensity>(&volume->density)) volumeFiles.push_back(vdb->file);
-        dsm::tools::checkOutputs(outputs, volumeFiles);
+        dsm::tools::checkOutputs(outputs, scene.files);
         options.threads = dsm::tools::usableThreadsNoted("dsm-build", threads, quiet);
         if (!quiet) announceLargeBuild(dsm::estimateBuild(scene, options), options.samplesPerPixel);
         Progress progress(quiet);

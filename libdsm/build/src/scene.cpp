@@ -202,11 +202,15 @@ public:
         fail(path, "expected " + what + ", got " + describe(got));
     }
 
+    /// The path of a file the scene names, recorded in files().
     std::string resolve(const std::string& file) const {
         const std::filesystem::path p(file);
-        if (p.is_absolute() || base_.empty()) return p.lexically_normal().string();
-        return (std::filesystem::path(base_) / p).lexically_normal().string();
+        std::string resolved = p.is_absolute() || base_.empty() ? p.lexically_normal().string()
+                                                                : (std::filesystem::path(base_) / p).lexically_normal().string();
+        files_.push_back(resolved);
+        return resolved;
     }
+    const std::vector<std::string>& files() const { return files_; }
 
     void requireObject(const json& v, const std::string& path, const char* what) const {
         if (!v.is_object()) expected(path, what, v);
@@ -333,6 +337,8 @@ private:
     std::uint64_t maxHairPoints_;
     /// Points the hair balls parsed so far generate (the parser is const).
     mutable std::uint64_t hairPoints_ = 0;
+    /// Every file the scene names, as resolved (the parser is const).
+    mutable std::vector<std::string> files_;
 };
 
 // ---------------------------------------------------------------------------
@@ -1174,6 +1180,7 @@ Scene parseScene(const std::string& jsonText, const std::string& baseDirectory, 
     if (!objects.is_array()) p.expected("/objects", "an array of objects", objects);
     scene.objects.reserve(objects.size());
     for (std::size_t i = 0; i < objects.size(); ++i) scene.objects.push_back(parseObject(p, objects[i], i));
+    scene.files = p.files();
     return scene;
 }
 

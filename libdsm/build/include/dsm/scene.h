@@ -123,6 +123,9 @@ struct Scene {
     std::string source;
     /// File the scene came from, for messages.
     std::string path;
+    /// Every file the scene reads (OBJ meshes, hair files, VDB grids), as
+    /// resolved paths: a tool refuses to write an output over any of them.
+    std::vector<std::string> files;
 
     /// True when some surface opacity differs between channels, so maps need
     /// RGB visibility.
