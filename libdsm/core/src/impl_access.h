@@ -4,6 +4,7 @@
 // Impl, and ImplAccess::Impl<Class> or ImplAccess::Nested... for the types.
 #pragma once
 
+#include <type_traits>
 #include <utility>
 
 #include "dsm/version.h"
@@ -12,8 +13,16 @@ DSM_NAMESPACE_BEGIN
 
 class ImplAccess {
 public:
+    // The types are named inside member declarations (where friendship grants
+    // access) and handed out through decltype: clang checks an alias
+    // template's access where it is used, not where it is declared.
     template <typename T>
-    using Impl = typename T::Impl;
+    static auto implPointer() -> typename T::Impl*;
+    template <typename T>
+    static auto tileOwnerPointer() -> typename T::TileOwner*;
+
+    template <typename T>
+    using Impl = std::remove_pointer_t<decltype(implPointer<T>())>;
 
     template <typename T>
     static const typename T::Impl& of(const T& object) {
@@ -26,7 +35,7 @@ public:
 
     /// The opaque keep-alive handle of a PixelFunction.
     template <typename T>
-    using TileOwner = typename T::TileOwner;
+    using TileOwner = std::remove_pointer_t<decltype(tileOwnerPointer<T>())>;
 
     /// Calls a private constructor of T.
     template <typename T, typename... Args>
