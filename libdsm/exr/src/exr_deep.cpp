@@ -870,6 +870,7 @@ public:
             throw Error(ErrorCode::io, concat(quoted(path), ": cannot open: ", std::strerror(errno)));
         if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, concat(quoted(path), ": not a regular file"));
         checkExrHeaderSizes(path, static_cast<std::uint64_t>(st.st_size));
+        fileBytes_ = static_cast<std::uint64_t>(st.st_size);
         limitOpenExrAllocations();
         bool tiled = false, deep = false, multiPart = false;
         if (!Imf::isOpenExrFile(path.c_str(), tiled, deep, multiPart))
@@ -906,6 +907,32 @@ public:
     }
 
     const Imf::Header& header() const { return tiledFile_ ? tiledFile_->header() : scanFile_->header(); }
+
+    /// OpenEXR allocates a chunk's unpacked size as the file records it, before
+    /// it decompresses anything: a few damaged bytes could ask for gigabytes.
+    /// Each chunk of rows [y0, y1) is read raw first (its size checked against
+    /// the file), and its unpacked size must be one zlib could produce from its
+    /// packed bytes (at most 1032:1, plus a little).
+    void checkScanlineChunks(int y0, int y1) {
+        const int linesPerChunk = header().compression() == Imf::ZIP_COMPRESSION ? 16 : 1;
+        std::vector<char> raw;
+        const int first = data_.min.y + (y0 - data_.min.y) / linesPerChunk * linesPerChunk;
+        for (int y = first; y < y1; y += linesPerChunk) {
+            std::uint64_t bytes = 0;
+            scanFile_->rawPixelData(y, nullptr, bytes);
+            if (bytes < 28 || bytes > fileBytes_)
+                throw Error(ErrorCode::corrupt, concat(quoted(path_), ": the chunk of row ", y, " records ", bytes,
+                                                       " bytes, more than the file has"));
+            raw.resize(std::size_t(bytes));
+            scanFile_->rawPixelData(y, raw.data(), bytes);
+            std::uint64_t packed = 0, unpacked = 0;
+            std::memcpy(&packed, raw.data() + 12, 8);  // little-endian, as OpenEXR files and this machine are
+            std::memcpy(&unpacked, raw.data() + 20, 8);
+            if (unpacked > packed * 1032 + 4096)
+                throw Error(ErrorCode::corrupt, concat(quoted(path_), ": the chunk of row ", y, " records ", unpacked,
+                                                       " unpacked bytes from ", packed, " packed bytes"));
+        }
+    }
     bool rgb() const { return rgb_; }
     const Imath::Box2i& display() const { return display_; }
 
@@ -922,6 +949,7 @@ public:
             scanFile_->setFrameBuffer(band.frameBuffer(hasZBack_, !rgb_, false));
             scanFile_->readPixelSampleCounts(y0, y1 - 1);
             size(band);
+            checkScanlineChunks(y0, y1);
             scanFile_->readPixels(y0, y1 - 1);
         } else {
             // Whole rows of tiles covering [y0, y1).
@@ -965,6 +993,7 @@ private:
     std::string path_;
     std::unique_ptr<Imf::MultiPartInputFile> file_;
     std::unique_ptr<Imf::DeepScanLineInputPart> scanFile_;
+    std::uint64_t fileBytes_ = 0;
     std::unique_ptr<Imf::DeepTiledInputPart> tiledFile_;
     bool hasZBack_ = false;
     bool rgb_ = false;
