@@ -908,6 +908,36 @@ public:
 
     const Imf::Header& header() const { return tiledFile_ ? tiledFile_->header() : scanFile_->header(); }
 
+    /// The same for the tiles of rows [ty0, ty1] of level 0: a raw tile holds
+    /// its coordinates (16 bytes), then the three sizes.
+    void checkTiles(int nx, int ty0, int ty1) {
+        std::vector<char> raw;
+        for (int ty = ty0; ty <= ty1; ++ty)
+            for (int tx = 0; tx < nx; ++tx) {
+                int dx = tx, dy = ty, lx = 0, ly = 0;
+                std::uint64_t bytes = 0;
+                tiledFile_->rawTileData(dx, dy, lx, ly, nullptr, bytes);
+                if (bytes < 40 || bytes > fileBytes_)
+                    throw Error(ErrorCode::corrupt, concat(quoted(path_), ": tile ", tx, ",", ty, " records ", bytes,
+                                                           " bytes, more than the file has"));
+                raw.resize(std::size_t(bytes));
+                dx = tx, dy = ty, lx = 0, ly = 0;
+                tiledFile_->rawTileData(dx, dy, lx, ly, raw.data(), bytes);
+                checkUnpackedSize(raw.data() + 24, "tile " + std::to_string(tx) + "," + std::to_string(ty));
+            }
+    }
+
+    /// A packed and an unpacked size, as OpenEXR writes them: the second must
+    /// be one zlib could produce from the first (at most 1032:1, plus a little).
+    void checkUnpackedSize(const char* sizes, const std::string& what) const {
+        std::uint64_t packed = 0, unpacked = 0;
+        std::memcpy(&packed, sizes, 8);  // little-endian, as OpenEXR files and this machine are
+        std::memcpy(&unpacked, sizes + 8, 8);
+        if (unpacked > packed * 1032 + 4096)
+            throw Error(ErrorCode::corrupt, concat(quoted(path_), ": ", what, " records ", unpacked,
+                                                   " unpacked bytes from ", packed, " packed bytes"));
+    }
+
     /// OpenEXR allocates a chunk's unpacked size as the file records it, before
     /// it decompresses anything: a few damaged bytes could ask for gigabytes.
     /// Each chunk of rows [y0, y1) is read raw first (its size checked against
@@ -925,12 +955,7 @@ public:
                                                        " bytes, more than the file has"));
             raw.resize(std::size_t(bytes));
             scanFile_->rawPixelData(y, raw.data(), bytes);
-            std::uint64_t packed = 0, unpacked = 0;
-            std::memcpy(&packed, raw.data() + 12, 8);  // little-endian, as OpenEXR files and this machine are
-            std::memcpy(&unpacked, raw.data() + 20, 8);
-            if (unpacked > packed * 1032 + 4096)
-                throw Error(ErrorCode::corrupt, concat(quoted(path_), ": the chunk of row ", y, " records ", unpacked,
-                                                       " unpacked bytes from ", packed, " packed bytes"));
+            checkUnpackedSize(raw.data() + 12, "the chunk of row " + std::to_string(y));
         }
     }
     bool rgb() const { return rgb_; }
@@ -962,6 +987,7 @@ public:
             const int nx = tiledFile_->numXTiles(0);
             tiledFile_->readPixelSampleCounts(0, nx - 1, ty0, ty1, 0, 0);
             size(band);
+            checkTiles(nx, ty0, ty1);
             tiledFile_->readTiles(0, nx - 1, ty0, ty1, 0, 0);
         }
         for (auto& pixel : band.samples)
