@@ -29,8 +29,6 @@ ALLOWED = {
     "reference": CORE_SIDE | {"build", "reference"},
     "c": CORE_SIDE | {"c"},
 }
-# Headers generated into the build tree at configure time, from libdsm/NAME.in.
-GENERATED = {"dsm/library_version.h": "core"}
 INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^">]+)[">]')
 SOURCES = {".h", ".hpp", ".c", ".cpp"}
 
@@ -46,7 +44,6 @@ def owners(library):
             public[header.name] = component
         for header in (component_dir / "src").glob("*.h"):
             private.setdefault(header.name, set()).add(component)
-    public.update(GENERATED)
     return public, private
 
 

@@ -1,4 +1,4 @@
-// Versions: of the library (from the build's project version) and of the .dsm
+// Versions: of the library (CMakeLists.txt reads its project version from here) and of the .dsm
 // file format it reads and writes (spec/dsm-format.md); and the versioned
 // namespace every public declaration lives in.
 #pragma once
@@ -6,7 +6,14 @@
 #include <cstdint>
 
 #include "dsm/export.h"
-#include "dsm/library_version.h"
+
+// The library version: the one place it is written. The top-level
+// CMakeLists.txt reads it from these lines, so a header needs nothing
+// generated at configure time.
+#define DSM_VERSION_MAJOR 0
+#define DSM_VERSION_MINOR 1
+#define DSM_VERSION_PATCH 0
+#define DSM_VERSION_STRING "0.1.0"
 
 /// Every public name is dsm::NAME, declared in the inline namespace
 /// dsm::vMAJOR: programs spell dsm::NAME, while the linker sees the major
