@@ -407,7 +407,6 @@ void benchLookups(benchmark::State& state, std::shared_ptr<const DeepShadowMap> 
     LookupContext context(map);
     std::uint64_t pixels = 0;
     double sum = 0.0;
-    const std::uint64_t steps0 = context.cursorSteps();
     for (auto _ : state) {
         for (const Query& q : *queries) {
             const LookupResult r = context.raster(q.rx, q.ry, q.z, options);
@@ -420,7 +419,6 @@ void benchLookups(benchmark::State& state, std::shared_ptr<const DeepShadowMap> 
     state.SetItemsProcessed(static_cast<std::int64_t>(lookups));
     state.counters["batch"] = static_cast<double>(queries->size());
     state.counters["px_per_lookup"] = static_cast<double>(pixels) / lookups;
-    state.counters["steps_per_lookup"] = static_cast<double>(context.cursorSteps() - steps0) / lookups;
 }
 
 void benchDirect(benchmark::State& state, const Inputs* in, const std::vector<Query>* queries) {
@@ -684,21 +682,21 @@ int main(int argc, char** argv) {
 
         std::printf("\n1. Warm bilinear lookups (box width 1, level 0), %zu random points\n", in.random.size());
         const double tWarm = per("warm/bilinear/random"), tDirect = per("direct/bilinear/random");
-        std::printf("%-14s %-36s %12s %14s %7s %10s %10s %15s\n", "points", "", "per lookup", "lookups/s", "spread",
-                    "px/lookup", "steps", "lookup/direct");
+        std::printf("%-14s %-36s %12s %14s %7s %10s %15s\n", "points", "", "per lookup", "lookups/s", "spread",
+                    "px/lookup", "lookup/direct");
         for (const char* set : {"random", "random-nonempty"}) {
             const std::string w = std::string("warm/bilinear/") + set, d = std::string("direct/bilinear/") + set;
             const char* label = std::string(set) == "random" ? "hair" : "all non-empty";
-            std::printf("%-14s %-36s %12s %14s %6.0f%% %10.2f %10.2f %15.2f\n", label,
+            std::printf("%-14s %-36s %12s %14s %6.0f%% %10.2f %15.2f\n", label,
                         "LookupContext::raster, warm cache", perLookup(per(w)).c_str(),
                         formatRate(1.0 / per(w), "").c_str(), spread(w), counter(w, "px_per_lookup"),
-                        counter(w, "steps_per_lookup"), per(w) / per(d));
+                        per(w) / per(d));
             std::printf("%-14s %-36s %12s %14s %6.0f%%\n", label, "direct VisibilityFunction::evaluate",
                         perLookup(per(d)).c_str(), formatRate(1.0 / per(d), "").c_str(), spread(d));
         }
         std::printf(
             "(hair: over the hair footprint, z uniform in the pixel's hair depths; all non-empty: over every "
-            "non-empty pixel, z uniform in the hair's depth range; steps = cursor steps per lookup)\n");
+            "non-empty pixel, z uniform in the hair's depth range)\n");
 
         std::printf("\n2. Lookup time vs box filter width (level-0 pixels), scanline of %zu receivers\n",
                     in.scanline.size());

@@ -5,19 +5,12 @@
 
 #include "dsm/error.h"
 #include "dsm/vertex_sink.h"
+#include "segment_search.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
 
-namespace {
-
-// Linear interpolation on the segment (za, va) -> (zb, vb) with za < zb.
-inline double lerpSegment(double za, double va, double zb, double vb, double z) {
-    const double t = (z - za) / (zb - za);
-    return va + t * (vb - va);
-}
-
-}  // namespace
+using detail::lerpSegment;
 
 VisibilityFunction::VisibilityFunction(int channels, bool withCounts)
     : channels_(channels), withCounts_(withCounts) {
@@ -150,10 +143,7 @@ namespace {
 // V(z) on vertices [begin, end) of `f`: right-continuous, 1 before the first.
 double evaluateRange(const VisibilityView& f, std::size_t begin, std::size_t end, double z, int channel) {
     const auto zs = f.depths();
-    const std::size_t k = static_cast<std::size_t>(
-        std::upper_bound(zs.begin() + static_cast<std::ptrdiff_t>(begin), zs.begin() + static_cast<std::ptrdiff_t>(end),
-                         z, [](double q, float zk) { return q < zk; }) -
-        zs.begin());
+    const std::size_t k = begin + detail::firstDepthAbove(zs.data() + begin, end - begin, z);
     if (k == begin) return 1.0;
     if (k == end) return f.value(end - 1, channel);
     return lerpSegment(zs[k - 1], f.value(k - 1, channel), zs[k], f.value(k, channel), z);

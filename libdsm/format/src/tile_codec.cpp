@@ -25,19 +25,41 @@ std::size_t pixelTableBytes(std::size_t pixels) {
 
 }  // namespace
 
-VisibilityView DecodedTile::pixel(std::size_t p) const {
-    const std::size_t v0 = vertexStart[p], v1 = vertexStart[p + 1];
-    const std::size_t c0 = valueStart[p], c1 = valueStart[p + 1];
-    const std::size_t l0 = layerStart[p], l1 = layerStart[p + 1];
-    std::span<const std::uint32_t> pixelCounts;
-    if (!counts.empty()) pixelCounts = std::span<const std::uint32_t>(counts).subspan(v0, v1 - v0);
-    return VisibilityView(std::span<const float>(z).subspan(v0, v1 - v0), std::span<const float>(v).subspan(c0, c1 - c0),
-                          pixelCounts, channels[p], std::span<const std::uint32_t>(layerStarts).subspan(l0, l1 - l0));
+DecodedTile::DecodedTile(std::uint32_t w, std::uint32_t h, std::uint64_t vertices, std::uint64_t valueTotal,
+                         std::uint64_t layerTotal, bool hasCounts)
+    : width(w), height(h) {
+    static_assert(sizeof(PixelRecord) == 16 && sizeof(float) == 4 && alignof(PixelRecord) == 4);
+    const std::size_t pixels = pixelCount();
+    storageBytes_ = (pixels + 1) * sizeof(PixelRecord) + 4 * (vertices * (hasCounts ? 2 : 1) + valueTotal + layerTotal);
+    // An array of bytes from new[] implicitly creates the records and floats
+    // placed in it (C++20); every one is written before it is read.
+    storage_.reset(new std::byte[storageBytes_]);
+    std::byte* at = storage_.get();
+    records_ = reinterpret_cast<PixelRecord*>(at);
+    at += (pixels + 1) * sizeof(PixelRecord);
+    for (std::size_t p = 0; p <= pixels; ++p) records_[p] = PixelRecord{0, 0, 0, 1};
+    z_ = reinterpret_cast<float*>(at);
+    at += 4 * vertices;
+    v_ = reinterpret_cast<float*>(at);
+    at += 4 * valueTotal;
+    if (hasCounts) {
+        counts_ = reinterpret_cast<std::uint32_t*>(at);
+        at += 4 * vertices;
+    }
+    layerStarts_ = reinterpret_cast<std::uint32_t*>(at);
 }
 
-std::size_t DecodedTile::memoryBytes() const {
-    return sizeof(DecodedTile) + (vertexStart.size() + valueStart.size() + layerStart.size()) * 4 + channels.size() +
-           z.size() * 4 + v.size() * 4 + counts.size() * 4 + layerStarts.size() * 4;
+VisibilityView DecodedTile::pixel(std::size_t p) const {
+    if (!records_) return {};
+    const PixelRecord& a = records_[p];
+    const PixelRecord& b = records_[p + 1];
+    const std::size_t vertices = b.vertexStart - a.vertexStart;
+    std::span<const std::uint32_t> pixelCounts;
+    if (counts_) pixelCounts = std::span<const std::uint32_t>(counts_ + a.vertexStart, vertices);
+    return VisibilityView(std::span<const float>(z_ + a.vertexStart, vertices),
+                          std::span<const float>(v_ + a.valueStart, b.valueStart - a.valueStart), pixelCounts,
+                          static_cast<int>(a.channels),
+                          std::span<const std::uint32_t>(layerStarts_ + a.layerStart, b.layerStart - a.layerStart));
 }
 
 EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int zlibLevel) {
@@ -101,15 +123,8 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     };
     // Pixel p of the tile in level coordinates, as the validation errors below name it.
     auto pixelAt = [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); };
-    DecodedTile tile;
-    tile.width = width;
-    tile.height = height;
-    const std::size_t pixels = tile.pixelCount();
-    tile.vertexStart.assign(pixels + 1, 0);
-    tile.valueStart.assign(pixels + 1, 0);
-    tile.layerStart.assign(pixels + 1, 0);
-    tile.channels.assign(pixels, 1);
-    if (summary.empty()) return tile;
+    const std::size_t pixels = static_cast<std::size_t>(width) * height;
+    if (summary.empty()) return DecodedTile(width, height, 0, 0, 0, false);
 
     if (stored.size() != summary.storedBytes) fail("stored size does not match the directory");
     const std::uint32_t crc = crc32(stored.data(), stored.size());
@@ -130,8 +145,11 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
         fail(concat("stored size ", summary.storedBytes, " exceeds the raw size ", summary.rawBytes));
     }
 
+    // The pixel table first, checked and totalled, so that the tile is
+    // allocated once at its final size.
     ByteReader r(raw.data(), raw.size());
     if (!r.need(pixelTableBytes(pixels))) fail(concat("tile of ", raw.size(), " bytes is too short for its pixel table"));
+    std::vector<PixelRecord> records(pixels + 1, PixelRecord{0, 0, 0, 1});
     std::uint64_t previous = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t cumulative = r.u32();
@@ -140,48 +158,52 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
             fail(concat(pixelAt(p), ": ", cumulative - previous, " vertices exceed the reader's limit ",
                         limits.maxVerticesPerPixel),
                  ErrorCode::limit);
-        tile.vertexStart[p + 1] = cumulative;
+        records[p + 1].vertexStart = cumulative;
         previous = cumulative;
     }
     if (previous != summary.vertexCount)
         fail(concat("pixel table holds ", previous, " vertices, the directory ", summary.vertexCount));
-    std::vector<std::uint8_t> layers(pixels);
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint8_t flags = r.u8();
         if (flags & ~kKnownPixelFlags) fail(concat(pixelAt(p), ": unknown flags 0x", std::hex, int(flags)));
-        tile.channels[p] = (flags & kPixelRgb) ? 3 : 1;
-        if (tile.channels[p] > layout.fileChannels) fail(concat(pixelAt(p), ": RGB pixel in a monochrome map"));
+        records[p].channels = (flags & kPixelRgb) ? 3 : 1;
+        if (static_cast<int>(records[p].channels) > layout.fileChannels)
+            fail(concat(pixelAt(p), ": RGB pixel in a monochrome map"));
     }
     std::uint64_t layerTotal = 0, valueTotal = 0, expected = pixelTableBytes(pixels);
     const std::uint64_t perVertexExtra = 4 + (layout.hasCounts ? 4 : 0);
     for (std::size_t p = 0; p < pixels; ++p) {
-        layers[p] = r.u8();
-        const std::uint32_t n = tile.vertexStart[p + 1] - tile.vertexStart[p];
-        if (layers[p] < 1 || layers[p] > layout.maxLayers)
-            fail(concat(pixelAt(p), ": layer count ", int(layers[p]), " is not in [1, ", layout.maxLayers, "]"));
-        if (layers[p] > 1 && layers[p] > n) fail(concat(pixelAt(p), ": ", int(layers[p]), " layers but ", n, " vertices"));
-        layerTotal += layers[p] - 1u;
-        valueTotal += std::uint64_t(n) * tile.channels[p];
-        expected += 4ull * (layers[p] - 1u) + n * (perVertexExtra + 4ull * tile.channels[p]);
-        tile.valueStart[p + 1] = static_cast<std::uint32_t>(valueTotal);
-        tile.layerStart[p + 1] = static_cast<std::uint32_t>(layerTotal);
+        const std::uint8_t layers = r.u8();
+        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
+        if (layers < 1 || layers > layout.maxLayers)
+            fail(concat(pixelAt(p), ": layer count ", int(layers), " is not in [1, ", layout.maxLayers, "]"));
+        if (layers > 1 && layers > n) fail(concat(pixelAt(p), ": ", int(layers), " layers but ", n, " vertices"));
+        layerTotal += layers - 1u;
+        valueTotal += std::uint64_t(n) * records[p].channels;
+        expected += 4ull * (layers - 1u) + n * (perVertexExtra + 4ull * records[p].channels);
+        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
+        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
     }
     if (expected != raw.size())
         fail(concat("tile holds ", raw.size(), " bytes but its pixel table describes ", expected));
     r.seek(pixelTableBytes(pixels));
 
-    tile.z.resize(summary.vertexCount);
-    tile.v.resize(valueTotal);
-    tile.layerStarts.resize(layerTotal);
-    if (layout.hasCounts) tile.counts.resize(summary.vertexCount);
+    DecodedTile tile(width, height, summary.vertexCount, valueTotal, layerTotal, layout.hasCounts);
+    std::copy(records.begin(), records.end(), tile.records());
+    float* const z = tile.depths();
+    float* const v = tile.values();
+    std::uint32_t* const counts = tile.counts();
+    std::uint32_t* const layerStarts = tile.layerStarts();
     float minZ = std::numeric_limits<float>::infinity(), maxZ = -std::numeric_limits<float>::infinity();
     std::uint32_t nonEmpty = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
-        for (std::uint32_t l = tile.layerStart[p]; l < tile.layerStart[p + 1]; ++l) tile.layerStarts[l] = r.u32();
-        for (std::uint32_t i = tile.vertexStart[p]; i < tile.vertexStart[p + 1]; ++i) tile.z[i] = r.f32();
-        for (std::uint32_t i = tile.valueStart[p]; i < tile.valueStart[p + 1]; ++i) tile.v[i] = r.f32();
+        const PixelRecord& a = records[p];
+        const PixelRecord& b = records[p + 1];
+        for (std::uint32_t l = a.layerStart; l < b.layerStart; ++l) layerStarts[l] = r.u32();
+        for (std::uint32_t i = a.vertexStart; i < b.vertexStart; ++i) z[i] = r.f32();
+        for (std::uint32_t i = a.valueStart; i < b.valueStart; ++i) v[i] = r.f32();
         if (layout.hasCounts)
-            for (std::uint32_t i = tile.vertexStart[p]; i < tile.vertexStart[p + 1]; ++i) tile.counts[i] = r.u32();
+            for (std::uint32_t i = a.vertexStart; i < b.vertexStart; ++i) counts[i] = r.u32();
         const VisibilityView view = tile.pixel(p);
         try {
             view.validate();

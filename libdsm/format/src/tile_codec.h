@@ -2,7 +2,9 @@
 // "Tile data".
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <span>
 #include <string>
 #include <vector>
@@ -12,22 +14,55 @@
 
 namespace dsm::format {
 
-/// A decoded tile: every pixel's arrays concatenated, with per-pixel starts.
-struct DecodedTile {
+/// Where one pixel's arrays start in a DecodedTile; pixel p spans
+/// [records[p], records[p + 1]) of each array.
+struct PixelRecord {
+    std::uint32_t vertexStart;  ///< into depths() and counts()
+    std::uint32_t valueStart;   ///< into values()
+    std::uint32_t layerStart;   ///< into layerStarts()
+    std::uint32_t channels;     ///< 1 or 3 (the pixel's own; an RGB map may hold mono pixels)
+};
+
+/// A decoded tile in one block of memory: the pixel records (pixels + 1), then
+/// all depths, all values, the counts (if the map has them) and the layer
+/// starts, each contiguous. Lookups read a pixel's record and then its depths
+/// and values, which lie next to those of its neighbours; a monochrome pixel
+/// has one value per vertex.
+class DecodedTile {
+public:
+    DecodedTile() = default;
+    /// Storage for a tile of width x height pixels holding these totals; the
+    /// records are zero, to be filled by the decoder.
+    DecodedTile(std::uint32_t width, std::uint32_t height, std::uint64_t vertices, std::uint64_t values,
+                std::uint64_t layerStarts, bool hasCounts);
+
     std::uint32_t width = 0;
     std::uint32_t height = 0;
-    std::vector<std::uint32_t> vertexStart;  // pixels + 1, into z and counts
-    std::vector<std::uint32_t> valueStart;   // pixels + 1, into v
-    std::vector<std::uint32_t> layerStart;   // pixels + 1, into layerStarts
-    std::vector<std::uint8_t> channels;      // per pixel, 1 or 3
-    std::vector<float> z;
-    std::vector<float> v;
-    std::vector<std::uint32_t> counts;       // empty without counts
-    std::vector<std::uint32_t> layerStarts;  // pixel-relative first vertex of layers 1, 2, ...
 
     std::size_t pixelCount() const { return static_cast<std::size_t>(width) * height; }
+    const PixelRecord* records() const { return records_; }
+    const float* depths() const { return z_; }
+    const float* values() const { return v_; }
+    const std::uint32_t* counts() const { return counts_; }  ///< null without counts
+    const std::uint32_t* layerStarts() const { return layerStarts_; }
+
+    PixelRecord* records() { return records_; }
+    float* depths() { return z_; }
+    float* values() { return v_; }
+    std::uint32_t* counts() { return counts_; }
+    std::uint32_t* layerStarts() { return layerStarts_; }
+
     VisibilityView pixel(std::size_t index) const;
-    std::size_t memoryBytes() const;
+    std::size_t memoryBytes() const { return sizeof(DecodedTile) + storageBytes_; }
+
+private:
+    std::unique_ptr<std::byte[]> storage_;  // every array below points into it
+    std::size_t storageBytes_ = 0;
+    PixelRecord* records_ = nullptr;
+    float* z_ = nullptr;
+    float* v_ = nullptr;
+    std::uint32_t* counts_ = nullptr;
+    std::uint32_t* layerStarts_ = nullptr;
 };
 
 /// What the layout of a tile depends on.

@@ -14,6 +14,7 @@
 #include "dsm/names.h"
 #include "dsm/output_file.h"
 #include "dsm/reader.h"
+#include "dsm/shadow_system.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/sweep.h"
 #include "dsm/tile_cache.h"

@@ -55,11 +55,24 @@ struct LookupFailure {
     std::string message;
 };
 
-/// Lookups for one thread. Keeps the last few tiles it touched (so coherent
-/// lookups rarely reach the shared cache) and, per recently used pixel, the
-/// segment of the last evaluation, searching forward or backward from it
-/// (Lokovic & Veach §3.4). Not thread-safe itself: give each thread its own.
-/// The map must stay open while the context is used.
+/// Where a lookup's point is given: raster (level-0 pixels of the map and the
+/// light depth z, see LightCamera), light space, or world space through the
+/// map's light camera.
+enum class LookupSpace { raster, light, world };
+
+/// Tiles a per-thread lookup state keeps at hand (LookupContext, and
+/// ShadowSystemOptions::threadTiles by default): each slot holds a reference
+/// that keeps its tile in memory, outside the cache's budget, until the slot
+/// is reused.
+constexpr unsigned kDefaultThreadTiles = 64;
+
+/// Lookups in one map for one thread. Prefer ShadowSystem when a renderer
+/// looks up several maps: its per-thread state serves all of them and it
+/// bounds open files. Keeps the last kDefaultThreadTiles tiles it touched
+/// (so that lookups rarely reach the shared cache) and finds the segment of
+/// each pixel's function by a branch-free binary search. Not thread-safe
+/// itself: give each thread its own. The map must stay open while the
+/// context is used.
 ///
 /// Points outside the map (or behind a perspective light) are lit: V = 1.
 /// Pixels of the footprint that fall outside the image are left out and the
@@ -89,9 +102,6 @@ public:
     bool tryWorld(const std::array<double, 3>& p, const LookupOptions& options, LookupResult& result) noexcept;
     /// The failure of the last try* lookup that returned false.
     const LookupFailure& lastFailure() const noexcept;
-
-    /// Number of segment steps taken by the per-pixel cursors (coherence).
-    std::uint64_t cursorSteps() const;
 
 private:
     struct Impl;

@@ -1,0 +1,396 @@
+#include "lookup_state.h"
+
+#include <algorithm>
+#include <cmath>
+#include <exception>
+#include <new>
+
+#include "dsm/error.h"
+#include "pixel_filter.h"
+#include "reader_impl.h"
+#include "segment_search.h"
+#include "splitmix64.h"
+#include "text.h"
+
+DSM_NAMESPACE_BEGIN
+
+using detail::concat;
+
+namespace {
+
+double minimumWidth(PixelFilter filter) { return filter == PixelFilter::Box ? 1.0 : 2.0; }
+
+// 2^-level, exactly (levels are far below 64).
+double levelScale(unsigned level) { return 1.0 / static_cast<double>(std::uint64_t(1) << level); }
+
+// The weight of pixel i (centre i + 0.5) for a footprint of half-width r
+// centred at c, along one axis.
+inline double pixelWeight(PixelFilter filter, long i, double c, double r) {
+    switch (filter) {
+        case PixelFilter::Box: {
+            // Overlap of the pixel [i, i+1] with the footprint [c - r, c + r].
+            const double lo = std::max(static_cast<double>(i), c - r);
+            const double hi = std::min(static_cast<double>(i) + 1.0, c + r);
+            return std::max(0.0, hi - lo);
+        }
+        case PixelFilter::Triangle:
+            return detail::triangleWeight((static_cast<double>(i) + 0.5) - c, r);
+        case PixelFilter::Gaussian: {
+            const double d = (static_cast<double>(i) + 0.5) - c;
+            return std::abs(d) < r ? detail::gaussianWeight(d * d, r) : 0.0;
+        }
+    }
+    return 0.0;
+}
+
+// Weights along one axis for a footprint of width w (pixels of this level)
+// centred at c, over pixel centres i + 0.5.
+void axisWeights(PixelFilter filter, double c, double w, std::uint32_t extent, AxisWeights& out) {
+    const double r = 0.5 * w;
+    // Pixels outside [0, extent) are left out by the caller anyway: clipping
+    // here (in double, before converting) bounds the work and the conversion
+    // for any width and position.
+    out.first = static_cast<long>(std::clamp(std::floor(c - r - 0.5), -1.0, static_cast<double>(extent)));
+    const long last = static_cast<long>(std::clamp(std::ceil(c + r - 0.5), -1.0, static_cast<double>(extent)));
+    out.weights.clear();
+    for (long i = out.first; i <= last; ++i) out.weights.push_back(pixelWeight(filter, i, c, r));
+}
+
+// True when a footprint of this width touches at most the two pixels on each
+// side of the point along each axis (bilinear interpolation): the box of
+// width 1 and the triangle of width 2.
+bool isBilinear(PixelFilter filter, double width) {
+    return (filter == PixelFilter::Box && width == 1.0) || (filter == PixelFilter::Triangle && width == 2.0);
+}
+
+// Visibility of pixel p of a tile at depth z: v[0] for a monochrome pixel
+// (the caller copies it when the map is RGB), v[0..2] for an RGB one.
+// Returns the pixel's channel count. Same rules and arithmetic as
+// VisibilityView::evaluate.
+inline int evaluatePixel(const format::DecodedTile& t, std::size_t p, double z, double v[3]) {
+    const format::PixelRecord& a = t.records()[p];
+    const format::PixelRecord& b = t.records()[p + 1];
+    const int channels = static_cast<int>(a.channels);
+    std::size_t end0 = b.vertexStart - a.vertexStart;
+    if (end0 == 0) {
+        v[0] = v[1] = v[2] = 1.0;
+        return channels;
+    }
+    const float* zs = t.depths() + a.vertexStart;
+    if (b.layerStart != a.layerStart) {
+        // Layered (multilayer transparent shadow maps): the light-centre
+        // function is layer 0, and 0 from its last vertex on.
+        end0 = t.layerStarts()[a.layerStart];
+        if (z >= static_cast<double>(zs[end0 - 1])) {
+            v[0] = v[1] = v[2] = 0.0;
+            return channels;
+        }
+    }
+    const std::size_t k = detail::firstDepthAbove(zs, end0, z);
+    const float* vs = t.values() + a.valueStart;
+    for (int c = 0; c < channels; ++c) {
+        if (k == 0) v[c] = 1.0;
+        else if (k == end0) v[c] = vs[(end0 - 1) * channels + c];
+        else v[c] = detail::lerpSegment(zs[k - 1], vs[(k - 1) * channels + c], zs[k], vs[k * channels + c], z);
+    }
+    return channels;
+}
+
+// Keeps why a lookup failed; a message that cannot be stored is left empty.
+void recordFailure(LookupFailure& failure, ErrorCode code, const char* message) noexcept {
+    failure.code = code;
+    try {
+        failure.message = message;
+    } catch (...) {
+        failure.message.clear();
+    }
+}
+
+LookupResult failureValue(int channels) {
+    LookupResult r;
+    r.channels = channels;
+    r.errorBound = 1.0;
+    return r;
+}
+
+// Raster position and depth of a point; false when it is lit without a
+// lookup (behind a perspective light). Throws for a non-finite point.
+bool toRaster(const MapInfo& info, LookupSpace space, const std::array<double, 3>& p, double& rx, double& ry,
+              double& z) {
+    if (space == LookupSpace::raster) {
+        rx = p[0];
+        ry = p[1];
+        z = p[2];
+        return true;
+    }
+    const std::array<double, 3> light = space == LookupSpace::world ? info.camera.worldToLightSpace(p) : p;
+    if (info.camera.lightToRaster(light, static_cast<int>(info.width), static_cast<int>(info.height), rx, ry, z))
+        return true;
+    if (!std::isfinite(light[0]) || !std::isfinite(light[1]) || !std::isfinite(light[2]))
+        throw Error(ErrorCode::argument,
+                    concat("lookup: light-space point ", light[0], ",", light[1], ",", light[2], " is not finite"));
+    return false;
+}
+
+}  // namespace
+
+LookupState::LookupState(unsigned tileSlots) {
+    std::size_t n = 1;
+    while (n < tileSlots) n <<= 1;
+    slots_.resize(n);
+    slotMask_ = n - 1;
+}
+
+std::size_t LookupState::memoryBytes() const {
+    return sizeof(*this) + slots_.capacity() * sizeof(TileSlot) +
+           (wx_.weights.capacity() + wy_.weights.capacity()) * sizeof(double) +
+           batchOrder_.capacity() * sizeof(BatchItem) + batchRaster_.capacity() * sizeof(batchRaster_[0]);
+}
+
+void LookupState::releaseTiles() {
+    for (TileSlot& s : slots_) s = TileSlot{};
+}
+
+const format::DecodedTile& LookupState::tile(const MapImpl& map, unsigned level, std::uint32_t tx,
+                                             std::uint32_t ty) {
+    const std::uint32_t index = ty * map.info.levels[level].tilesX + tx;
+    const std::uint64_t hash = detail::mix64(map.fileId * 0x9E3779B97F4A7C15ull ^ (std::uint64_t(level) << 32 | index));
+    TileSlot& slot = slots_[hash & slotMask_];
+    if (slot.file == map.fileId && slot.level == level && slot.index == index) {
+        ++tileTableHits;
+        return *slot.tile;
+    }
+    ++tileTableMisses;
+    std::shared_ptr<const format::DecodedTile> loaded = map.getTile(level, tx, ty);  // may throw: slot unchanged
+    slot.file = map.fileId;
+    slot.level = level;
+    slot.index = index;
+    slot.tile = loaded.get();
+    slot.keepAlive = std::move(loaded);
+    return *slot.tile;
+}
+
+// The bilinear footprint: the pixels floor(c - 1/2) and the next along each
+// axis are the only ones with non-zero weight, visited in the general path's
+// order (rows, then columns) with the same weights, so the result is the same
+// to the bit.
+double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx, double cy, double z,
+                                  PixelFilter filter, double width, double out[3], int& pixelsUsed) {
+    const LevelInfo& L = map.info.levels[level];
+    const double r = 0.5 * width;
+    const long x0 = static_cast<long>(std::floor(cx - 0.5));
+    const long y0 = static_cast<long>(std::floor(cy - 0.5));
+    const double wxs[2] = {pixelWeight(filter, x0, cx, r), pixelWeight(filter, x0 + 1, cx, r)};
+    const double wys[2] = {pixelWeight(filter, y0, cy, r), pixelWeight(filter, y0 + 1, cy, r)};
+    const std::uint32_t T = map.info.tileSize;
+    const bool mono = map.info.channels == 1;
+    double total = 0.0;
+    out[0] = out[1] = out[2] = 0.0;
+    for (int j = 0; j < 2; ++j) {
+        const long y = y0 + j;
+        if (y < 0 || y >= static_cast<long>(L.height) || wys[j] == 0.0) continue;
+        for (int i = 0; i < 2; ++i) {
+            const long x = x0 + i;
+            if (x < 0 || x >= static_cast<long>(L.width) || wxs[i] == 0.0) continue;
+            const double w = wxs[i] * wys[j];
+            const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y);
+            const format::DecodedTile& t = tile(map, level, ux / T, uy / T);
+            double v[3];
+            if (evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v) == 1) v[1] = v[2] = v[0];
+            out[0] += w * v[0];
+            if (!mono) {
+                out[1] += w * v[1];
+                out[2] += w * v[2];
+            }
+            total += w;
+            ++pixelsUsed;
+        }
+    }
+    if (total > 0.0) {
+        out[0] /= total;
+        if (!mono) {
+            out[1] /= total;
+            out[2] /= total;
+        }
+    }
+    if (mono) out[1] = out[2] = out[0];
+    return total;
+}
+
+// Filtered visibility of one level; returns the total weight used.
+double LookupState::filterLevel(const MapImpl& map, unsigned level, double rx, double ry, double z, double width,
+                                PixelFilter filter, double out[3], int& pixelsUsed) {
+    const double scale = levelScale(level);
+    if (isBilinear(filter, width))
+        return bilinearLevel(map, level, rx * scale, ry * scale, z, filter, width, out, pixelsUsed);
+    const LevelInfo& L = map.info.levels[level];
+    axisWeights(filter, rx * scale, width, L.width, wx_);
+    axisWeights(filter, ry * scale, width, L.height, wy_);
+    const std::uint32_t T = map.info.tileSize;
+    double total = 0.0;
+    out[0] = out[1] = out[2] = 0.0;
+    for (std::size_t j = 0; j < wy_.weights.size(); ++j) {
+        const long y = wy_.first + static_cast<long>(j);
+        if (y < 0 || y >= static_cast<long>(L.height) || wy_.weights[j] == 0.0) continue;
+        for (std::size_t i = 0; i < wx_.weights.size(); ++i) {
+            const long x = wx_.first + static_cast<long>(i);
+            if (x < 0 || x >= static_cast<long>(L.width) || wx_.weights[i] == 0.0) continue;
+            const double w = wx_.weights[i] * wy_.weights[j];
+            const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y);
+            const format::DecodedTile& t = tile(map, level, ux / T, uy / T);
+            double v[3];
+            if (evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v) == 1) v[1] = v[2] = v[0];
+            for (int c = 0; c < 3; ++c) out[c] += w * v[c];
+            total += w;
+            ++pixelsUsed;
+        }
+    }
+    if (total > 0.0)
+        for (int c = 0; c < 3; ++c) out[c] /= total;
+    return total;
+}
+
+LookupResult LookupState::raster(const MapImpl& map, double rx, double ry, double z, const LookupOptions& options) {
+    const MapInfo& info = map.info;
+    if (!std::isfinite(rx) || !std::isfinite(ry) || !std::isfinite(z))
+        throw Error(ErrorCode::argument, concat("lookup: point ", rx, ",", ry, " at depth ", z, " is not finite"));
+    if (!std::isfinite(options.filterWidth) || options.filterWidth < 0.0)
+        throw Error(ErrorCode::argument,
+                    concat("lookup: filter width ", options.filterWidth, " is not a finite value >= 0"));
+    if (!std::isfinite(options.bias))
+        throw Error(ErrorCode::argument, concat("lookup: bias ", options.bias, " is not finite"));
+    LookupResult result;
+    result.channels = info.channels;
+    // Points outside the raster [0, width] x [0, height] are lit (lookup.h),
+    // even when a wide footprint would reach pixels inside.
+    if (!(rx >= 0.0 && rx <= static_cast<double>(info.width) && ry >= 0.0 && ry <= static_cast<double>(info.height)))
+        return result;
+    const double zq = z - options.bias;
+    const double minWidth = minimumWidth(options.filter);
+    const double width = std::max(options.filterWidth, minWidth);
+    const unsigned coarsest = static_cast<unsigned>(info.levels.size() - 1);
+
+    unsigned level0, level1;
+    double blend;
+    if (options.level) {
+        level0 = level1 = std::min(*options.level, coarsest);
+        blend = 0.0;
+    } else if (width == minWidth) {
+        level0 = level1 = 0;  // the log below is 0
+        blend = 0.0;
+    } else {
+        const double lambda = std::max(0.0, std::log2(width / minWidth));
+        level0 = std::min(static_cast<unsigned>(std::floor(lambda)), coarsest);
+        level1 = std::min(level0 + 1, coarsest);
+        blend = level1 == level0 ? 0.0 : lambda - std::floor(lambda);
+    }
+    double a[3], b[3];
+    const double w0 = std::max(width * levelScale(level0), minWidth);
+    const double total0 = filterLevel(map, level0, rx, ry, zq, w0, options.filter, a, result.pixelsUsed);
+    double total1 = 0.0;
+    if (blend > 0.0) {
+        const double w1 = std::max(width * levelScale(level1), minWidth);
+        total1 = filterLevel(map, level1, rx, ry, zq, w1, options.filter, b, result.pixelsUsed);
+    }
+    double bound = 0.0;
+    if (total0 > 0.0) bound = info.levels[level0].errorBound;
+    if (total1 > 0.0) bound = std::max(bound, info.levels[level1].errorBound);
+    for (int c = 0; c < 3; ++c) {
+        const double va = total0 > 0.0 ? a[c] : 1.0;
+        const double vb = total1 > 0.0 ? b[c] : va;
+        result.v[static_cast<std::size_t>(c)] = std::clamp(va + blend * (vb - va), 0.0, 1.0);
+    }
+    if (total0 <= 0.0 && total1 <= 0.0) result.v = {1.0, 1.0, 1.0};
+    result.errorBound = bound;
+    return result;
+}
+
+LookupResult LookupState::at(const MapImpl& map, LookupSpace space, const std::array<double, 3>& p,
+                             const LookupOptions& options) {
+    double rx, ry, z;
+    if (!toRaster(map.info, space, p, rx, ry, z)) {
+        LookupResult lit;
+        lit.channels = map.info.channels;
+        return lit;
+    }
+    return raster(map, rx, ry, z, options);
+}
+
+bool LookupState::tryAt(const MapImpl& map, LookupSpace space, const std::array<double, 3>& p,
+                        const LookupOptions& options, LookupResult& result) noexcept {
+    try {
+        result = at(map, space, p, options);
+        return true;
+    } catch (const Error& e) {
+        recordFailure(failure, e.code(), e.what());
+    } catch (const std::bad_alloc&) {
+        recordFailure(failure, ErrorCode::limit, "lookup: out of memory");
+    } catch (const std::exception& e) {
+        recordFailure(failure, ErrorCode::internal, e.what());
+    } catch (...) {
+        recordFailure(failure, ErrorCode::internal, "lookup: unknown failure");
+    }
+    result = failureValue(map.info.channels);
+    return false;
+}
+
+std::size_t LookupState::tryBatch(const MapImpl& map, LookupSpace space, Span<const std::array<double, 3>> points,
+                                  const LookupOptions& options, Span<LookupResult> results) noexcept {
+    const std::size_t n = std::min(points.size(), results.size());
+    std::size_t failures = 0;
+    // Sorting needs scratch space; without it the points are looked up in
+    // the order given (same answers, less locality).
+    bool sorted = n > 1;
+    if (sorted) {
+        try {
+            batchOrder_.resize(n);
+            batchRaster_.resize(n);
+        } catch (...) {
+            sorted = false;
+        }
+    }
+    if (!sorted) {
+        for (std::size_t i = 0; i < n; ++i)
+            if (!tryAt(map, space, points[i], options, results[i])) ++failures;
+        return failures;
+    }
+    // Order the points by the level-0 tile under them, so that each tile's
+    // points are looked up together and its pixels stay in the processor's
+    // caches. Points that are lit without a lookup or invalid go last.
+    const MapInfo& info = map.info;
+    const std::uint32_t T = info.tileSize;
+    const std::uint64_t tilesX = info.levels[0].tilesX;
+    constexpr std::uint64_t kNoTile = ~std::uint64_t(0);
+    for (std::size_t i = 0; i < n; ++i) {
+        std::uint64_t key = kNoTile;
+        double rx = 0.0, ry = 0.0, z = 0.0;
+        bool inside = false;
+        try {
+            inside = toRaster(info, space, points[i], rx, ry, z);
+        } catch (...) {
+            inside = false;  // looked up again below, which records the failure
+            rx = ry = z = std::nan("");
+        }
+        if (inside && rx >= 0.0 && ry >= 0.0 && rx < static_cast<double>(info.width) &&
+            ry < static_cast<double>(info.height))
+            key = (static_cast<std::uint64_t>(ry) / T) * tilesX + static_cast<std::uint64_t>(rx) / T;
+        batchOrder_[i] = BatchItem{key, i};
+        batchRaster_[i] = {rx, ry, z};
+    }
+    std::sort(batchOrder_.begin(), batchOrder_.begin() + static_cast<std::ptrdiff_t>(n),
+              [](const BatchItem& a, const BatchItem& b) { return a.key < b.key; });
+    for (std::size_t j = 0; j < n; ++j) {
+        const std::size_t i = batchOrder_[j].index;
+        bool ok;
+        if (batchOrder_[j].key != kNoTile) {
+            const auto& r = batchRaster_[i];
+            ok = tryAt(map, LookupSpace::raster, r, options, results[i]);
+        } else {
+            ok = tryAt(map, space, points[i], options, results[i]);
+        }
+        if (!ok) ++failures;
+    }
+    return failures;
+}
+
+DSM_NAMESPACE_END
