@@ -63,11 +63,10 @@ bool isBilinear(PixelFilter filter, double width) {
     return (filter == PixelFilter::Box && width == 1.0) || (filter == PixelFilter::Triangle && width == 2.0);
 }
 
-// Visibility of pixel p of a tile at depth z: v[0] for a monochrome pixel
-// (the caller copies it when the map is RGB), v[0..2] for an RGB one.
-// Returns the pixel's channel count. Same rules and arithmetic as
+// Visibility of pixel p of a tile at depth z in v[0..2] (a monochrome
+// pixel's value three times). Returns the pixel's channel count. Same rules and arithmetic as
 // VisibilityView::evaluate.
-inline int evaluatePixel(const format::DecodedTile& t, std::size_t p, double z, double v[3]) {
+[[gnu::always_inline]] inline int evaluatePixel(const format::DecodedTile& t, std::size_t p, double z, double v[3]) {
     const format::PixelRecord& a = t.records()[p];
     const format::PixelRecord& b = t.records()[p + 1];
     const int channels = static_cast<int>(a.channels);
@@ -88,10 +87,17 @@ inline int evaluatePixel(const format::DecodedTile& t, std::size_t p, double z, 
     }
     const std::size_t k = detail::firstDepthAbove(zs, end0, z);
     const float* vs = t.values() + a.valueStart;
-    for (int c = 0; c < channels; ++c) {
-        if (k == 0) v[c] = 1.0;
-        else if (k == end0) v[c] = vs[(end0 - 1) * channels + c];
-        else v[c] = detail::lerpSegment(zs[k - 1], vs[(k - 1) * channels + c], zs[k], vs[k * channels + c], z);
+    const auto channel = [&](int c) {
+        if (k == 0) return 1.0;
+        if (k == end0) return static_cast<double>(vs[(end0 - 1) * channels + c]);
+        return detail::lerpSegment(zs[k - 1], vs[(k - 1) * channels + c], zs[k], vs[k * channels + c], z);
+    };
+    v[0] = channel(0);
+    if (channels == 3) {
+        v[1] = channel(1);
+        v[2] = channel(2);
+    } else {
+        v[1] = v[2] = v[0];
     }
     return channels;
 }
@@ -135,7 +141,7 @@ bool toRaster(const MapInfo& info, LookupSpace space, const std::array<double, 3
 }  // namespace
 
 LookupState::LookupState(unsigned tileSlots) {
-    std::size_t n = 1;
+    std::size_t n = 2;  // pairs of slots
     while (n < tileSlots) n <<= 1;
     slots_.resize(n);
     slotMask_ = n - 1;
@@ -155,13 +161,22 @@ const format::DecodedTile& LookupState::tile(const MapImpl& map, unsigned level,
                                              std::uint32_t ty) {
     const std::uint32_t index = ty * map.info.levels[level].tilesX + tx;
     const std::uint64_t hash = detail::mix64(map.fileId * 0x9E3779B97F4A7C15ull ^ (std::uint64_t(level) << 32 | index));
-    TileSlot& slot = slots_[hash & slotMask_];
-    if (slot.file == map.fileId && slot.level == level && slot.index == index) {
-        ++tileTableHits;
-        return *slot.tile;
+    // Two-way: the key may sit in either slot of its pair; a miss replaces
+    // the one not used last.
+    TileSlot* pair = &slots_[hash & slotMask_ & ~std::size_t(1)];
+    for (int w = 0; w < 2; ++w) {
+        TileSlot& s = pair[w];
+        if (s.file == map.fileId && s.level == level && s.index == index) {
+            ++tileTableHits;
+            pair[0].recent = w == 0;
+            return *s.tile;
+        }
     }
     ++tileTableMisses;
-    std::shared_ptr<const format::DecodedTile> loaded = map.getTile(level, tx, ty);  // may throw: slot unchanged
+    std::shared_ptr<const format::DecodedTile> loaded = map.getTile(level, tx, ty);  // may throw: slots unchanged
+    const int victim = pair[0].recent ? 1 : 0;
+    pair[0].recent = victim == 0;
+    TileSlot& slot = pair[victim];
     slot.file = map.fileId;
     slot.level = level;
     slot.index = index;
@@ -184,8 +199,32 @@ double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx,
     const double wys[2] = {pixelWeight(filter, y0, cy, r), pixelWeight(filter, y0 + 1, cy, r)};
     const std::uint32_t T = map.info.tileSize;
     const bool mono = map.info.channels == 1;
+    // Usually all four pixels lie in one tile: fetch it once.
+    const format::DecodedTile* shared = nullptr;
+    if (x0 >= 0 && y0 >= 0 && x0 + 1 < static_cast<long>(L.width) && y0 + 1 < static_cast<long>(L.height) &&
+        static_cast<std::uint32_t>(x0) / T == static_cast<std::uint32_t>(x0 + 1) / T &&
+        static_cast<std::uint32_t>(y0) / T == static_cast<std::uint32_t>(y0 + 1) / T)
+        shared = &tile(map, level, static_cast<std::uint32_t>(x0) / T, static_cast<std::uint32_t>(y0) / T);
     double total = 0.0;
     out[0] = out[1] = out[2] = 0.0;
+    if (shared && mono) {
+        // The common case, straight-line. A pixel of weight 0 adds +0 to the
+        // sums, which leaves them unchanged: the same result as skipping it.
+        const format::DecodedTile& t = *shared;
+        const std::size_t p = std::size_t(static_cast<std::uint32_t>(y0) % T) * t.width + static_cast<std::uint32_t>(x0) % T;
+        double v00[3], v01[3], v10[3], v11[3];
+        evaluatePixel(t, p, z, v00);
+        evaluatePixel(t, p + 1, z, v01);
+        evaluatePixel(t, p + t.width, z, v10);
+        evaluatePixel(t, p + t.width + 1, z, v11);
+        const double w00 = wxs[0] * wys[0], w01 = wxs[1] * wys[0], w10 = wxs[0] * wys[1], w11 = wxs[1] * wys[1];
+        out[0] = w00 * v00[0] + w01 * v01[0] + w10 * v10[0] + w11 * v11[0];
+        total = w00 + w01 + w10 + w11;
+        pixelsUsed += (w00 != 0.0) + (w01 != 0.0) + (w10 != 0.0) + (w11 != 0.0);
+        if (total > 0.0) out[0] /= total;
+        out[1] = out[2] = out[0];
+        return total;
+    }
     for (int j = 0; j < 2; ++j) {
         const long y = y0 + j;
         if (y < 0 || y >= static_cast<long>(L.height) || wys[j] == 0.0) continue;
@@ -194,9 +233,9 @@ double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx,
             if (x < 0 || x >= static_cast<long>(L.width) || wxs[i] == 0.0) continue;
             const double w = wxs[i] * wys[j];
             const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y);
-            const format::DecodedTile& t = tile(map, level, ux / T, uy / T);
+            const format::DecodedTile& t = shared ? *shared : tile(map, level, ux / T, uy / T);
             double v[3];
-            if (evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v) == 1) v[1] = v[2] = v[0];
+            evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v);
             out[0] += w * v[0];
             if (!mono) {
                 out[1] += w * v[1];
@@ -239,7 +278,7 @@ double LookupState::filterLevel(const MapImpl& map, unsigned level, double rx, d
             const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y);
             const format::DecodedTile& t = tile(map, level, ux / T, uy / T);
             double v[3];
-            if (evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v) == 1) v[1] = v[2] = v[0];
+            evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v);
             for (int c = 0; c < 3; ++c) out[c] += w * v[c];
             total += w;
             ++pixelsUsed;

@@ -27,7 +27,7 @@ struct AxisWeights {
 
 class LookupState {
 public:
-    /// `tileSlots` (rounded up to a power of two, at least 1) tiles are kept
+    /// `tileSlots` (rounded up to a power of two, at least 2) tiles are kept
     /// at hand, each with a reference that keeps it alive.
     explicit LookupState(unsigned tileSlots);
 
@@ -61,6 +61,7 @@ private:
         std::uint64_t file = 0;  // 0: empty (file ids start at 1)
         std::uint32_t level = 0;
         std::uint32_t index = 0;
+        bool recent = false;  // in the first slot of a pair: it was used last
         const format::DecodedTile* tile = nullptr;
         std::shared_ptr<const format::DecodedTile> keepAlive;
     };
