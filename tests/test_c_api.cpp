@@ -224,6 +224,72 @@ TEST_F(CApi, LookupsEqualTheCppLookupsBitForBit) {
     dsm_map_close(map);
 }
 
+TEST_F(CApi, ShadowSystemLookupsEqualTheContextLookupsBitForBit) {
+    dsm_map* map = nullptr;
+    ASSERT_EQ(dsm_map_open(path_.c_str(), nullptr, &map), DSM_OK) << dsm_last_error_message();
+    dsm_lookup_context* context = nullptr;
+    ASSERT_EQ(dsm_lookup_context_create(map, &context), DSM_OK);
+    dsm_shadow_system_options so = DSM_SHADOW_SYSTEM_OPTIONS_INIT;
+    so.cache_bytes = 4096;  // tiles come and go
+    so.max_open_files = 1;
+    dsm_shadow_system* system = nullptr;
+    ASSERT_EQ(dsm_shadow_system_create(&so, &system), DSM_OK) << dsm_last_error_message();
+    dsm_map_handle* handle = nullptr;
+    ASSERT_EQ(dsm_shadow_system_open(system, path_.c_str(), &handle), DSM_OK) << dsm_last_error_message();
+    dsm_map_handle* again = nullptr;
+    ASSERT_EQ(dsm_shadow_system_open(system, path_.c_str(), &again), DSM_OK);
+    EXPECT_EQ(handle, again);
+    dsm_shadow_thread* thread = nullptr;
+    ASSERT_EQ(dsm_shadow_thread_create(system, &thread), DSM_OK);
+    dsm_map_info a{}, b{};
+    a.size = b.size = sizeof(dsm_map_info);
+    ASSERT_EQ(dsm_map_get_info(map, &a), DSM_OK);
+    ASSERT_EQ(dsm_shadow_system_get_map_info(system, handle, &b), DSM_OK);
+    EXPECT_EQ(std::memcmp(&a, &b, sizeof a), 0);
+    const std::size_t n = 5000;  // more than one chunk of the batch
+    for (int space : {DSM_SPACE_WORLD, DSM_SPACE_RASTER})
+        for (int filter : {DSM_FILTER_BOX, DSM_FILTER_GAUSSIAN}) {
+            dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;
+            o.space = space;
+            o.filter = filter;
+            o.filter_width = filter == DSM_FILTER_BOX ? 1.0 : 4.0;
+            const std::vector<double> p = points(space, n, 300u + std::uint64_t(space * 10 + filter));
+            std::vector<double> want(3 * n), wantBounds(n), got(3 * n), gotBounds(n);
+            ASSERT_EQ(dsm_lookup(context, &o, n, p.data(), want.data(), wantBounds.data()), DSM_OK);
+            ASSERT_EQ(dsm_shadow_lookup(thread, handle, &o, n, p.data(), got.data(), gotBounds.data()), DSM_OK)
+                << dsm_last_error_message();
+            for (std::size_t i = 0; i < 3 * n; ++i) ASSERT_TRUE(sameBits(got[i], want[i])) << "value " << i;
+            for (std::size_t i = 0; i < n; ++i) ASSERT_TRUE(sameBits(gotBounds[i], wantBounds[i])) << "bound " << i;
+        }
+    dsm_shadow_system_stats stats{};
+    stats.size = sizeof stats;
+    ASSERT_EQ(dsm_shadow_system_get_stats(system, &stats), DSM_OK);
+    EXPECT_EQ(stats.maps, 1u);
+    EXPECT_LE(stats.files_open, 1u);
+    EXPECT_GT(stats.tiles_read, 0u);
+    EXPECT_GT(stats.evictions, 0u);
+    ASSERT_EQ(dsm_shadow_system_reset_stats(system), DSM_OK);
+    ASSERT_EQ(dsm_shadow_system_get_stats(system, &stats), DSM_OK);
+    EXPECT_EQ(stats.tiles_read, 0u);
+
+    // Failures: a missing map, a bad point (the others are still answered).
+    dsm_map_handle* missingMap = nullptr;
+    expectFailure(dsm_shadow_system_open(system, (dir_ / "missing.dsm").string().c_str(), &missingMap), DSM_ERROR_IO,
+                  "missing.dsm");
+    const double bad[6] = {1.0, 1.0, std::nan(""), 0.1, 0.1, 2.0};
+    double v[6], bounds[2];
+    dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;
+    o.space = DSM_SPACE_LIGHT;
+    expectFailure(dsm_shadow_lookup(thread, handle, &o, 2, bad, v, bounds), DSM_ERROR_ARGUMENT, "not finite");
+    EXPECT_EQ(v[0], 1.0);
+    EXPECT_EQ(bounds[0], 1.0);
+    expectFailure(dsm_shadow_lookup(thread, nullptr, &o, 2, bad, v, bounds), DSM_ERROR_ARGUMENT, "handle");
+    dsm_shadow_thread_destroy(thread);
+    dsm_shadow_system_destroy(system);
+    dsm_lookup_context_destroy(context);
+    dsm_map_close(map);
+}
+
 TEST_F(CApi, MemoryAndCallbackInputsAnswerAsThePath) {
     dsm_cache* cache = nullptr;
     ASSERT_EQ(dsm_cache_create(1u << 20, &cache), DSM_OK);

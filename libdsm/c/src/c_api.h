@@ -2,16 +2,19 @@
 // exceptions become dsm_result codes.
 #pragma once
 
+#include <array>
 #include <cstring>
 #include <exception>
 #include <memory>
 #include <new>
 #include <string>
+#include <vector>
 
 #include "dsm/dsm_c.h"
 #include "dsm/error.h"
 #include "dsm/lookup.h"
 #include "dsm/reader.h"
+#include "dsm/shadow_system.h"
 #include "dsm/soft_shadow.h"
 #include "dsm/tile_cache.h"
 
@@ -29,6 +32,17 @@ struct dsm_pixel {
 
 struct dsm_lookup_context {
     std::unique_ptr<dsm::LookupContext> context;
+};
+
+struct dsm_shadow_system {
+    std::shared_ptr<dsm::ShadowSystem> system;
+};
+
+struct dsm_shadow_thread {
+    std::shared_ptr<dsm::ShadowSystem> system;  // kept alive while the thread state is
+    std::unique_ptr<dsm::ShadowThread> thread;
+    std::vector<std::array<double, 3>> points;  // one chunk of a batch, reused
+    std::vector<dsm::LookupResult> results;
 };
 
 struct dsm_soft_light {
@@ -73,6 +87,14 @@ inline dsm_result fail(ErrorCode code, const char* function, const char* what) n
 
 /// A failure of a NULL required argument, naming the function and the argument.
 dsm_result missing(const char* function, const char* argument) noexcept;
+
+/// Fills dsm_map_info (a versioned struct) from a map.
+dsm_result mapInfo(const DeepShadowMap& map, dsm_map_info* info, const char* function) noexcept;
+
+/// Reads dsm_lookup_options (NULL: the defaults) into the C++ options and
+/// space; reports a bad field as `function`'s failure.
+dsm_result lookupOptions(const dsm_lookup_options* options, const char* function, LookupOptions& lookup,
+                         LookupSpace& space) noexcept;
 
 /// Copies a caller's struct that starts with its own size into `out` (which
 /// holds this library's defaults): the fields the caller knows replace the

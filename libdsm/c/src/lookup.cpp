@@ -28,19 +28,9 @@ dsm_result dsm_lookup(dsm_lookup_context* context, const dsm_lookup_options* opt
         if (!context) return missing("dsm_lookup", "context");
         if (count > 0 && !points) return missing("dsm_lookup", "points");
         if (count > 0 && !visibility) return missing("dsm_lookup", "visibility");
-        dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;
-        if (const dsm_result r = dsm::c::readVersioned(options, o, "dsm_lookup"); r != DSM_OK) return r;
-        if (o.space < DSM_SPACE_WORLD || o.space > DSM_SPACE_RASTER)
-            return fail(DSM_ERROR_ARGUMENT, "dsm_lookup", "space is not DSM_SPACE_WORLD, _LIGHT or _RASTER");
-        if (o.filter < DSM_FILTER_BOX || o.filter > DSM_FILTER_GAUSSIAN)
-            return fail(DSM_ERROR_ARGUMENT, "dsm_lookup", "filter is not DSM_FILTER_BOX, _TRIANGLE or _GAUSSIAN");
-        if (o.level < DSM_LEVEL_AUTO)
-            return fail(DSM_ERROR_ARGUMENT, "dsm_lookup", "level is neither DSM_LEVEL_AUTO nor >= 0");
         dsm::LookupOptions lookup;
-        lookup.filter = static_cast<dsm::PixelFilter>(o.filter);
-        lookup.filterWidth = o.filter_width;
-        if (o.level != DSM_LEVEL_AUTO) lookup.level = static_cast<unsigned>(o.level);
-        lookup.bias = o.bias;
+        dsm::LookupSpace space;
+        if (const dsm_result r = dsm::c::lookupOptions(options, "dsm_lookup", lookup, space); r != DSM_OK) return r;
 
         dsm::LookupContext& c = *context->context;
         dsm_result first = DSM_OK;
@@ -48,14 +38,14 @@ dsm_result dsm_lookup(dsm_lookup_context* context, const dsm_lookup_options* opt
         for (std::size_t i = 0; i < count; ++i) {
             const double* p = points + 3 * i;
             bool ok = false;
-            switch (o.space) {
-            case DSM_SPACE_WORLD:
+            switch (space) {
+            case dsm::LookupSpace::world:
                 ok = c.tryWorld({p[0], p[1], p[2]}, lookup, result);
                 break;
-            case DSM_SPACE_LIGHT:
+            case dsm::LookupSpace::light:
                 ok = c.tryLight({p[0], p[1], p[2]}, lookup, result);
                 break;
-            default:
+            case dsm::LookupSpace::raster:
                 ok = c.tryRaster(p[0], p[1], p[2], lookup, result);
                 break;
             }
@@ -68,3 +58,27 @@ dsm_result dsm_lookup(dsm_lookup_context* context, const dsm_lookup_options* opt
 }
 
 }  // extern "C"
+
+namespace dsm::c {
+
+dsm_result lookupOptions(const dsm_lookup_options* options, const char* function, LookupOptions& lookup,
+                         LookupSpace& space) noexcept {
+    dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;
+    if (const dsm_result r = readVersioned(options, o, function); r != DSM_OK) return r;
+    if (o.space < DSM_SPACE_WORLD || o.space > DSM_SPACE_RASTER)
+        return fail(DSM_ERROR_ARGUMENT, function, "space is not DSM_SPACE_WORLD, _LIGHT or _RASTER");
+    if (o.filter < DSM_FILTER_BOX || o.filter > DSM_FILTER_GAUSSIAN)
+        return fail(DSM_ERROR_ARGUMENT, function, "filter is not DSM_FILTER_BOX, _TRIANGLE or _GAUSSIAN");
+    if (o.level < DSM_LEVEL_AUTO)
+        return fail(DSM_ERROR_ARGUMENT, function, "level is neither DSM_LEVEL_AUTO nor >= 0");
+    lookup.filter = static_cast<PixelFilter>(o.filter);
+    lookup.filterWidth = o.filter_width;
+    if (o.level != DSM_LEVEL_AUTO) lookup.level = static_cast<unsigned>(o.level);
+    lookup.bias = o.bias;
+    space = o.space == DSM_SPACE_WORLD ? LookupSpace::world
+            : o.space == DSM_SPACE_LIGHT ? LookupSpace::light
+                                         : LookupSpace::raster;
+    return DSM_OK;
+}
+
+}  // namespace dsm::c

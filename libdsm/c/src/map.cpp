@@ -134,28 +134,7 @@ void dsm_map_close(dsm_map* map) { delete map; }
 dsm_result dsm_map_get_info(const dsm_map* map, dsm_map_info* info) {
     return guarded([&] {
         if (!map) return missing("dsm_map_get_info", "map");
-        if (!info) return missing("dsm_map_get_info", "info");
-        const dsm::MapInfo& m = map->map->info();
-        dsm_map_info full{};
-        full.size = sizeof(dsm_map_info);
-        full.width = m.width;
-        full.height = m.height;
-        full.tile_size = m.tileSize;
-        full.channels = m.channels;
-        full.has_counts = m.hasCounts ? 1 : 0;
-        full.max_layers = m.maxLayers;
-        full.level_count = static_cast<uint32_t>(m.levels.size());
-        full.projection = static_cast<int32_t>(m.camera.projection);
-        std::copy(m.camera.worldToLight.begin(), m.camera.worldToLight.end(), full.world_to_light);
-        std::copy(m.camera.screenWindow.begin(), m.camera.screenWindow.end(), full.screen_window);
-        full.near_plane = m.camera.nearPlane;
-        full.filter = static_cast<int32_t>(m.filter);
-        full.filter_width = m.filterWidth;
-        full.error_bound = m.levels.empty() ? 0.0 : m.levels[0].errorBound;
-        full.file_bytes = m.fileBytes;
-        full.version_major = m.versionMajor;
-        full.version_minor = m.versionMinor;
-        return dsm::c::writeVersioned(full, info, "dsm_map_get_info");
+        return dsm::c::mapInfo(*map->map, info, "dsm_map_get_info");
     });
 }
 
@@ -230,3 +209,32 @@ dsm_result dsm_pixel_evaluate(const dsm_pixel* pixel, double z, double* visibili
 void dsm_pixel_release(dsm_pixel* pixel) { delete pixel; }
 
 }  // extern "C"
+
+namespace dsm::c {
+
+dsm_result mapInfo(const DeepShadowMap& map, dsm_map_info* info, const char* function) noexcept {
+    if (!info) return missing(function, "info");
+        const dsm::MapInfo& m = map.info();
+        dsm_map_info full{};
+        full.size = sizeof(dsm_map_info);
+        full.width = m.width;
+        full.height = m.height;
+        full.tile_size = m.tileSize;
+        full.channels = m.channels;
+        full.has_counts = m.hasCounts ? 1 : 0;
+        full.max_layers = m.maxLayers;
+        full.level_count = static_cast<uint32_t>(m.levels.size());
+        full.projection = static_cast<int32_t>(m.camera.projection);
+        std::copy(m.camera.worldToLight.begin(), m.camera.worldToLight.end(), full.world_to_light);
+        std::copy(m.camera.screenWindow.begin(), m.camera.screenWindow.end(), full.screen_window);
+        full.near_plane = m.camera.nearPlane;
+        full.filter = static_cast<int32_t>(m.filter);
+        full.filter_width = m.filterWidth;
+        full.error_bound = m.levels.empty() ? 0.0 : m.levels[0].errorBound;
+        full.file_bytes = m.fileBytes;
+        full.version_major = m.versionMajor;
+        full.version_minor = m.versionMinor;
+    return writeVersioned(full, info, function);
+}
+
+}  // namespace dsm::c

@@ -213,6 +213,63 @@ DSM_C_API void dsm_lookup_context_destroy(dsm_lookup_context* context);
 DSM_C_API dsm_result dsm_lookup(dsm_lookup_context* context, const dsm_lookup_options* options, size_t count,
                                 const double* points, double* visibility, double* error_bounds);
 
+/* ---------------------------------------------------------------- shadow system */
+
+/** One per renderer: the tile cache, the open map files and the maps, shared
+ *  by every thread (as OpenImageIO's TextureSystem). Thread-safe. Lookups go
+ *  through a per-thread state (dsm_shadow_thread) that serves every map of
+ *  the system. */
+typedef struct dsm_shadow_system dsm_shadow_system;
+/** A map opened in a system: owned by it, valid until the system is destroyed. */
+typedef struct dsm_map_handle dsm_map_handle;
+/** Lookup state of one thread for every map of one system. Not thread-safe:
+ *  one per thread. Keeps its system alive. */
+typedef struct dsm_shadow_thread dsm_shadow_thread;
+
+typedef struct dsm_shadow_system_options {
+    size_t size;             /**< sizeof(dsm_shadow_system_options) */
+    uint64_t cache_bytes;    /**< tile cache budget in bytes of decoded tiles */
+    uint32_t max_open_files; /**< map files open at once, at least 1; closed files reopen on demand */
+    uint32_t thread_tiles;   /**< tiles each thread keeps at hand (alive outside the budget) */
+} dsm_shadow_system_options;
+#define DSM_SHADOW_SYSTEM_OPTIONS_INIT {sizeof(dsm_shadow_system_options), 268435456u, 100u, 64u}
+
+typedef struct dsm_shadow_system_stats {
+    size_t size;                /**< sizeof(dsm_shadow_system_stats) */
+    uint64_t bytes_in_use;      /**< decoded tile bytes the cache holds */
+    uint64_t peak_bytes_in_use; /**< largest bytes_in_use since creation or a reset */
+    uint64_t tiles_read;        /**< tiles read and decoded from files */
+    uint64_t hits;              /**< cache requests answered without a read */
+    uint64_t misses;            /**< cache requests that read a tile */
+    uint64_t evictions;         /**< tiles dropped to stay within the budget */
+    uint64_t maps;              /**< maps opened */
+    uint64_t files_open;        /**< map files open now */
+    uint64_t peak_files_open;   /**< most open at once since creation or a reset */
+    uint64_t reopens;           /**< reopens of files closed to stay within max_open_files */
+} dsm_shadow_system_stats;
+
+/** `options` may be NULL (DSM_SHADOW_SYSTEM_OPTIONS_INIT). */
+DSM_C_API dsm_result dsm_shadow_system_create(const dsm_shadow_system_options* options, dsm_shadow_system** system);
+/** Destroys the system once no dsm_shadow_thread of it remains; handles die with it. */
+DSM_C_API void dsm_shadow_system_destroy(dsm_shadow_system* system);
+/** Opens the map at `path`, or gives the handle it already has (the path is the key). */
+DSM_C_API dsm_result dsm_shadow_system_open(dsm_shadow_system* system, const char* path, dsm_map_handle** handle);
+DSM_C_API dsm_result dsm_shadow_system_get_map_info(const dsm_shadow_system* system, const dsm_map_handle* handle,
+                                                    dsm_map_info* info);
+DSM_C_API dsm_result dsm_shadow_system_get_stats(const dsm_shadow_system* system, dsm_shadow_system_stats* stats);
+DSM_C_API dsm_result dsm_shadow_system_reset_stats(dsm_shadow_system* system);
+DSM_C_API dsm_result dsm_shadow_thread_create(dsm_shadow_system* system, dsm_shadow_thread** thread);
+DSM_C_API void dsm_shadow_thread_destroy(dsm_shadow_thread* thread);
+
+/** dsm_lookup for a map of a system, on `thread`: the same answers to the bit.
+ *  The points are visited tile by tile, so a large batch of scattered points
+ *  costs less than the same lookups one by one. Every point is looked up; one
+ *  that fails gets V = 1 with error bound 1 and the call returns the first
+ *  such failure. */
+DSM_C_API dsm_result dsm_shadow_lookup(dsm_shadow_thread* thread, const dsm_map_handle* handle,
+                                       const dsm_lookup_options* options, size_t count, const double* points,
+                                       double* visibility, double* error_bounds);
+
 /* ---------------------------------------------------------------- one pixel */
 
 /** A visibility function as stored: vertex_count depths (non-decreasing),
