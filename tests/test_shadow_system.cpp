@@ -121,7 +121,7 @@ TEST(ShadowSystem, EightThreadsAgreeWithOneUnderASmallBudget) {
     options.threadTiles = 4;
     auto system = ShadowSystem::create(options);
     MapHandle* handle = system->open(path);
-    const auto pts = pointsFor(system->map(handle).info(), LookupSpace::raster, 9, 3000);
+    const auto pts = pointsFor(system->map(handle)->info(), LookupSpace::raster, 9, 3000);
     LookupOptions o;
     o.filter = PixelFilter::Gaussian;
     o.filterWidth = 3.0;

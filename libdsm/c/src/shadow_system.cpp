@@ -57,7 +57,7 @@ dsm_result dsm_shadow_system_get_map_info(const dsm_shadow_system* system, const
     return guarded([&] {
         if (!system) return missing("dsm_shadow_system_get_map_info", "system");
         if (!handle) return missing("dsm_shadow_system_get_map_info", "handle");
-        return dsm::c::mapInfo(system->system->map(toHandle(handle)), info, "dsm_shadow_system_get_map_info");
+        return dsm::c::mapInfo(*system->system->map(toHandle(handle)), info, "dsm_shadow_system_get_map_info");
     });
 }
 

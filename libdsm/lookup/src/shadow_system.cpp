@@ -50,7 +50,7 @@ std::shared_ptr<ShadowSystem> ShadowSystem::create(const ShadowSystemOptions& op
 
 ShadowSystem::ShadowSystem(const ShadowSystemOptions& options) : impl_(std::make_unique<Impl>()) {
     impl_->options = options;
-    impl_->cache = TileCache::create(options.cacheBytes);
+    impl_->cache = options.cache ? options.cache : TileCache::create(options.cacheBytes);
     impl_->files = FilePool::create(options.maxOpenFiles);
 }
 
@@ -84,9 +84,9 @@ MapHandle* ShadowSystem::open(std::shared_ptr<const MapInput> input, const std::
     return &s.handles.emplace_back(std::move(map));
 }
 
-const DeepShadowMap& ShadowSystem::map(const MapHandle* handle) const {
+std::shared_ptr<const DeepShadowMap> ShadowSystem::map(const MapHandle* handle) const {
     if (!handle) throw Error(ErrorCode::argument, "shadow system: no map handle given");
-    return *handle->map;
+    return handle->map;
 }
 
 std::unique_ptr<ShadowThread> ShadowSystem::createThread() {

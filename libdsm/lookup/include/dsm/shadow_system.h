@@ -19,7 +19,8 @@
 DSM_NAMESPACE_BEGIN
 
 struct ShadowSystemOptions {
-    /// Budget of the tile cache, in bytes of decoded tiles (TileCache).
+    /// Budget of the tile cache, in bytes of decoded tiles (TileCache), unless
+    /// `cache` is given.
     std::size_t cacheBytes = std::size_t(256) << 20;
     /// Most map files kept open at once (at least 1). A file closed to stay
     /// within the cap is reopened when one of its tiles is next read, after
@@ -32,9 +33,12 @@ struct ShadowSystemOptions {
     /// live outside the cache's budget; lower it when many threads share a
     /// small budget.
     unsigned threadTiles = kDefaultThreadTiles;
-    /// Limits for untrusted files (its `cache` member is ignored: the system
-    /// has its own).
+    /// Limits for untrusted files (its `cache` member is ignored).
     ReaderOptions limits;
+    /// The tile cache to use, shared with other systems or maps; null (the
+    /// default) makes one of cacheBytes for this system alone, and cacheBytes
+    /// is then ignored.
+    std::shared_ptr<TileCache> cache;
 };
 
 /// Counters of a ShadowSystem (plain values, copied out by stats()).
@@ -100,8 +104,10 @@ public:
     /// quote. Each call opens a new map (inputs are not compared).
     MapHandle* open(std::shared_ptr<const MapInput> input, const std::string& name);
 
-    /// The map behind a handle (for its info(), pixels, tiles).
-    const DeepShadowMap& map(const MapHandle* handle) const;
+    /// The map behind a handle (for its info(), pixels, tiles); it stays open
+    /// while the system or the returned pointer lives. Throws dsm::Error
+    /// (argument) for a null handle.
+    std::shared_ptr<const DeepShadowMap> map(const MapHandle* handle) const;
 
     /// A new per-thread state.
     std::unique_ptr<ShadowThread> createThread();
