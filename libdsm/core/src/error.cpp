@@ -32,8 +32,9 @@ std::size_t detailStart(std::string_view message, const std::string& file) {
     const std::string clipped = "'" + detail::clip(file, detail::kMaxQuotedPath) + "'";
     for (const std::string* quoted : {&exact, &clipped}) {
         const std::size_t at = message.find(*quoted);
-        // At the start, or after a lead-in such as "scene " that quotes nothing.
-        if (at == kNoFile || message.substr(0, at).find('\'') != kNoFile) continue;
+        // At the start, or after a lead-in that says what the file is ("scene ",
+        // "hair file "): words without a quote or a colon.
+        if (at == kNoFile || message.substr(0, at).find_first_of("':") != kNoFile) continue;
         std::size_t end = at + quoted->size();
         if (message.substr(end, 2) == ": ") end += 2;
         else if (message.substr(end, 1) == " ") end += 1;

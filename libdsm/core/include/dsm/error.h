@@ -44,9 +44,9 @@ public:
     Error(ErrorCode code, const std::string& message);
     /// An error about `file`. Precondition: `message` starts with the file
     /// quoted as messages quote it ("'a.dsm': ...", "'a.dsm' level 1 tile
-    /// 0,2: ..."), possibly after a few words saying what the file is
-    /// ("scene 'a.json': /light: ..."). When it does not, detail() is the
-    /// whole message.
+    /// 0,2: ..."), possibly after a few words saying what the file is, with
+    /// no quote or colon ("scene 'a.json': /light: ..."). When it does not,
+    /// detail() is the whole message.
     Error(ErrorCode code, const std::string& message, const std::string& file);
 
     ErrorCode code() const noexcept { return code_; }
