@@ -732,6 +732,42 @@ TEST_F(CApi, ATileThatCannotBeReadFailsItsPointsOnly) {
     dsm_map_close(map);
 }
 
+TEST_F(CApi, TheLastErrorNamesTheFileItConcerns) {
+    dsm_map* none = nullptr;
+    const std::string missingPath = (dir_ / "missing.dsm").string();
+    EXPECT_EQ(dsm_map_open(missingPath.c_str(), nullptr, &none), DSM_ERROR_IO);
+    EXPECT_EQ(std::string(dsm_last_error_file()), missingPath);
+    EXPECT_EQ(std::string(dsm_last_error_message()).rfind("'" + missingPath + "': cannot open", 0), 0u);
+    // A failure about no file forgets the file.
+    EXPECT_EQ(dsm_cache_create(1, nullptr), DSM_ERROR_ARGUMENT);
+    EXPECT_STREQ(dsm_last_error_file(), "");
+
+    // A tile that cannot be read, through lookups and pixels: the name the buffer was given.
+    Bytes damaged = bytes_;
+    damaged[kHeaderSize + 3] ^= 0x10;  // tile 0,0 of level 0 was written first
+    dsm_map* map = nullptr;
+    ASSERT_EQ(dsm_map_open_memory(damaged.data(), damaged.size(), "damaged", nullptr, &map), DSM_OK);
+    dsm_lookup_context* context = nullptr;
+    ASSERT_EQ(dsm_lookup_context_create(map, &context), DSM_OK);
+    dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;
+    o.space = DSM_SPACE_RASTER;
+    o.level = 0;
+    const double p[3] = {2.0, 2.0, 3.0};
+    double v[3];
+    EXPECT_EQ(dsm_lookup(context, &o, 1, p, v, nullptr), DSM_ERROR_CORRUPT);
+    EXPECT_STREQ(dsm_last_error_file(), "damaged");
+    dsm_clear_last_error();
+    EXPECT_STREQ(dsm_last_error_file(), "");
+    dsm_pixel* pixel = nullptr;
+    EXPECT_EQ(dsm_map_get_pixel(map, 0, 1, 1, &pixel), DSM_ERROR_CORRUPT);
+    EXPECT_STREQ(dsm_last_error_file(), "damaged");
+    dsm_level_info level;
+    EXPECT_EQ(dsm_map_get_level(map, 99, &level), DSM_ERROR_ARGUMENT);
+    EXPECT_STREQ(dsm_last_error_file(), "damaged");
+    dsm_lookup_context_destroy(context);
+    dsm_map_close(map);
+}
+
 TEST_F(CApi, TheLastErrorIsPerThreadAndTheCallbackSeesEveryFailure) {
     struct Seen {
         int calls = 0;

@@ -26,8 +26,8 @@ namespace dsm::tools {
 inline void requireRegularFile(const std::string& path) {
     struct stat st {};
     if (::stat(path.c_str(), &st) != 0) return;
-    if (S_ISDIR(st.st_mode)) throw Error(ErrorCode::io, "'" + path + "': is a directory, not a regular file");
-    if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, "'" + path + "': not a regular file");
+    if (S_ISDIR(st.st_mode)) throw Error(ErrorCode::io, "'" + path + "': is a directory, not a regular file", path);
+    if (!S_ISREG(st.st_mode)) throw Error(ErrorCode::io, "'" + path + "': not a regular file", path);
 }
 
 /// Bytes of standard input a tool copies before giving up, unless the
@@ -111,7 +111,8 @@ public:
             if (total > limit)
                 throw Error(ErrorCode::limit, "'<stdin>': longer than the limit of " + limitText(limit) +
                                                   " (set " + kStdinLimitVariable +
-                                                  " to raise it, or give the file's path)");
+                                                  " to raise it, or give the file's path)",
+                            name_);
             for (ssize_t done = 0; done < got;) {
                 const ssize_t put = ::write(copy_.fd, buffer + done, static_cast<std::size_t>(got - done));
                 if (put < 0 && errno == EINTR) continue;
@@ -119,7 +120,7 @@ public:
                 done += put;
             }
         }
-        if (total == 0) throw Error(ErrorCode::format, "'<stdin>': empty (no file on standard input)");
+        if (total == 0) throw Error(ErrorCode::format, "'<stdin>': empty (no file on standard input)", name_);
     }
     InputFile(const InputFile&) = delete;
     InputFile& operator=(const InputFile&) = delete;
@@ -138,7 +139,7 @@ private:
     };
 
     static Error failure(const std::string& what) {
-        return Error(ErrorCode::io, "'<stdin>': " + what + ": " + std::strerror(errno));
+        return Error(ErrorCode::io, "'<stdin>': " + what + ": " + std::strerror(errno), "<stdin>");
     }
 
     Descriptor copy_;

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <new>
 #include <string>
 #include <string_view>
@@ -18,6 +19,7 @@
 
 #include <CLI/CLI.hpp>
 
+#include "dsm/error.h"
 #include "dsm/output_file.h"
 
 #include "input_file.h"
@@ -49,20 +51,11 @@ inline std::string exceptionMessage(const std::exception& e) {
     return e.what();
 }
 
-/// `<tool>: ERROR '<file>': <message>`. libdsm's messages already start with
-/// the quoted file name ("'a.dsm': ..." or "'a.dsm' level 1 tile 0,2: ..."):
-/// that prefix is replaced rather than repeated. An empty file gives
-/// `<tool>: ERROR: <message>`.
+/// `<tool>: ERROR '<file>': <message>`, or `<tool>: ERROR: <message>` for an
+/// empty file.
 inline std::string errorLine(std::string_view tool, const std::string& file, const std::string& message) {
     if (file.empty()) return oneLine(std::string(tool) + ": ERROR: " + message);
-    const std::string quoted = "'" + file + "'";
-    std::string_view rest = message;
-    if (rest.substr(0, quoted.size()) == quoted) {
-        rest.remove_prefix(quoted.size());
-        if (rest.substr(0, 2) == ": ") rest.remove_prefix(2);
-        else if (rest.substr(0, 1) == " ") rest.remove_prefix(1);
-    }
-    return oneLine(std::string(tool) + ": ERROR " + quoted + ": " + std::string(rest));
+    return oneLine(std::string(tool) + ": ERROR '" + file + "': " + message);
 }
 
 /// Prints errorLine() to standard error, after flushing standard output so the
@@ -70,6 +63,37 @@ inline std::string errorLine(std::string_view tool, const std::string& file, con
 inline void reportError(std::string_view tool, const std::string& file, const std::string& message) {
     std::cout.flush();
     std::cerr << errorLine(tool, file, message) << '\n';
+}
+
+/// What to print for files whose path is not what the user gave: path ->
+/// name. A map or image read from standard input is opened as a temporary copy
+/// (InputFile::path()) and printed as "<stdin>" (InputFile::name()).
+using DisplayNames = std::map<std::string, std::string>;
+
+/// Adds `input` to `names` when it is printed under another name than its path.
+inline void addDisplayName(DisplayNames& names, const InputFile& input) {
+    if (input.path() != input.name()) names[input.path()] = input.name();
+}
+
+/// Reports an exception as one error line (reportError()). A dsm::Error that
+/// names a file is printed as that file and its Error::detail(); anything else
+/// as `fallbackFile` (the file the failed step was working on, or empty) and
+/// its whole message. A path in `displayNames` is printed under its name, also
+/// where the message quotes it (OpenEXR names the file it could not read).
+inline void reportException(std::string_view tool, const std::exception& e, const std::string& fallbackFile = {},
+                            const DisplayNames& displayNames = {}) {
+    std::string file = fallbackFile;
+    std::string message = exceptionMessage(e);
+    if (const auto* error = dynamic_cast<const dsm::Error*>(&e); error && !error->file().empty()) {
+        file = error->file();
+        message = error->detail();
+    }
+    for (const auto& [path, name] : displayNames) {
+        if (file == path) file = name;
+        for (std::size_t at = message.find(path); at != std::string::npos; at = message.find(path, at + name.size()))
+            message.replace(at, path.size(), name);
+    }
+    reportError(tool, file, message);
 }
 
 /// Sets the conventions on a CLI11 app: --version prints "<tool> <version>",

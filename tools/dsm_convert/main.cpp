@@ -144,14 +144,15 @@ int main(int argc, char** argv) {
     if (ortho->count()) importOptions.orthoWidth = orthoWidth;
     if (mips->count() && mipLevels != 0) importOptions.mipLevels = mipLevels;  // 0: the full pyramid
 
-    std::string inputName = input == "-" ? "<stdin>" : input, inputPath = input, current = input;
+    // What the failed step was working on, for errors that name no file.
+    std::string current = input == "-" ? "<stdin>" : input;
+    dsm::tools::DisplayNames displayNames;
     try {
         // Before any work: an output that cannot be written or would replace an input is refused.
         dsm::tools::checkOutputs({output}, cameraFrom.empty() ? std::vector<std::string>{input}
                                                               : std::vector<std::string>{input, cameraFrom});
         dsm::tools::InputFile in(input);
-        inputName = in.name();
-        inputPath = in.path();
+        dsm::tools::addDisplayName(displayNames, in);
         if (to == Kind::Exr) {
             const dsm::ExrExportReport r = dsm::exportDeepExr(in.path(), output, exportOptions);
             if (!quiet)
@@ -168,7 +169,7 @@ int main(int argc, char** argv) {
             if (!cameraFrom.empty()) {
                 current = cameraFrom;
                 importOptions.camera = dsm::DeepShadowMap::open(cameraFrom)->info().camera;
-                current = input;
+                current = in.name();
             }
             const dsm::ExrImportReport r = dsm::importDeepExr(in.path(), output, importOptions);
             if (!quiet)
@@ -179,14 +180,8 @@ int main(int argc, char** argv) {
                             r.tolerance, r.cameraSource.c_str());
         }
     } catch (const std::exception& e) {
-        // Library messages name the file they concern: the input, the output or the --camera-from map.
-        std::string what = dsm::tools::exceptionMessage(e);
-        if (inputPath != input)  // standard input: name it, not its temporary copy
-            for (std::size_t at; (at = what.find(inputPath)) != std::string::npos;)
-                what.replace(at, inputPath.size(), inputName);
-        std::string file = current == input ? inputName : current;
-        if (what.rfind("'" + output + "'", 0) == 0) file = output;
-        dsm::tools::reportError(kToolName, file, what);
+        // libdsm's errors name the file they concern: the input, the output or the --camera-from map.
+        dsm::tools::reportException(kToolName, e, current, displayNames);
         return dsm::tools::kExitFailure;
     }
     return dsm::tools::kExitOk;

@@ -63,35 +63,21 @@ struct Options {
     std::string output;
 };
 
-/// Runs `action`; any exception becomes one error line about `file`.
-/// Returns false when it failed.
+/// Runs `action`; any exception becomes one error line (tools::reportException):
+/// about the file a dsm::Error names, else about `file`. The action adds the
+/// temporary copy of standard input to `displayNames`, so that it is printed
+/// as "<stdin>". Returns false when it failed.
 template <class Action>
-bool guarded(const std::string& file, Action&& action) {
+bool guarded(const std::string& file, Action&& action, const tools::DisplayNames& displayNames = {}) {
     try {
         action();
         return true;
     } catch (const std::exception& e) {
-        tools::reportError(kToolName, file, tools::exceptionMessage(e));
+        tools::reportException(kToolName, e, file, displayNames);
     } catch (...) {
         tools::reportError(kToolName, file, "unknown error");
     }
     return false;
-}
-
-/// Runs `action` on a map read through `input`; libdsm's messages about the
-/// temporary copy of standard input then name it "<stdin>" instead.
-template <class Action>
-void namingInput(const tools::InputFile& input, Action&& action) {
-    try {
-        action();
-    } catch (const dsm::Error& e) {
-        if (input.path() == input.name()) throw;
-        std::string message = e.what();
-        for (std::size_t at = message.find(input.path()); at != std::string::npos;
-             at = message.find(input.path(), at + input.name().size()))
-            message.replace(at, input.path().size(), input.name());
-        throw dsm::Error(e.code(), message);
-    }
 }
 
 // ---------------------------------------------------------------------------
@@ -546,22 +532,25 @@ int describe(const Options& o) {
     bool first = true;
     for (const std::string& argument : o.files) {
         std::string name = argument == "-" ? "<stdin>" : argument;
-        allOk &= guarded(name, [&] {
-            const tools::InputFile input(argument);
-            std::ostringstream text;
-            Json json;
-            namingInput(input, [&] {
+        tools::DisplayNames displayNames;
+        allOk &= guarded(
+            name,
+            [&] {
+                const tools::InputFile input(argument);
+                tools::addDisplayName(displayNames, input);
+                std::ostringstream text;
+                Json json;
                 const auto map = dsm::DeepShadowMap::open(input.path());
                 describeOne(o, input.name(), *map, text, json);
-            });
-            if (o.json) {
-                results.push_back(std::move(json));
-            } else {
-                if (!first) std::cout << '\n';
-                std::cout << text.str();
-                first = false;
-            }
-        });
+                if (o.json) {
+                    results.push_back(std::move(json));
+                } else {
+                    if (!first) std::cout << '\n';
+                    std::cout << text.str();
+                    first = false;
+                }
+            },
+            displayNames);
     }
     if (o.json) {
         if (o.files.size() > 1) std::cout << dumpJson(results) << '\n';
@@ -574,11 +563,16 @@ int verify(const Options& o) {
     bool allOk = true;
     for (const std::string& argument : o.files) {
         const std::string name = argument == "-" ? "<stdin>" : argument;
-        allOk &= guarded(name, [&] {
-            const tools::InputFile input(argument);
-            namingInput(input, [&] { dsm::validate(input.path()); });
-            std::cout << input.name() << ": OK\n";
-        });
+        tools::DisplayNames displayNames;
+        allOk &= guarded(
+            name,
+            [&] {
+                const tools::InputFile input(argument);
+                tools::addDisplayName(displayNames, input);
+                dsm::validate(input.path());
+                std::cout << input.name() << ": OK\n";
+            },
+            displayNames);
         if (argument != "-")
             for (const std::string& stale : dsm::staleTemporaries(argument))
                 std::cout << name << ": note: '" << stale
@@ -601,9 +595,12 @@ int writePicture(const Options& o) {
     const unsigned level = o.level.value_or(0);
     dsm::FloatImage image;
     std::string note;
-    const bool computed = guarded(name, [&] {
-        const tools::InputFile input(argument);
-        namingInput(input, [&] {
+    tools::DisplayNames displayNames;
+    const bool computed = guarded(
+        name,
+        [&] {
+            const tools::InputFile input(argument);
+            tools::addDisplayName(displayNames, input);
             const auto map = dsm::DeepShadowMap::open(input.path());
             selectedLevels(*map, level);  // names the level when it does not exist
             switch (o.picture) {
@@ -622,8 +619,8 @@ int writePicture(const Options& o) {
                 }
                 case Picture::None: break;
             }
-        });
-    });
+        },
+        displayNames);
     if (!computed) return tools::kExitFailure;
     if (!guarded(o.output, [&] { dsm::writeImage(o.output, image); })) return tools::kExitFailure;
     std::cout << o.output << ": level " << level << " of " << name << ", " << image.width << " x " << image.height

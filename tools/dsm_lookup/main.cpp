@@ -193,13 +193,6 @@ private:
     dsm::SoftShadowOptions options_;
 };
 
-/// libdsm names the file in every message about the file; a message without
-/// it is about the query.
-bool isMapError(const std::string& message, const std::string& mapPath) {
-    const std::string prefix = "'" + mapPath + "'";
-    return message.compare(0, prefix.size(), prefix) == 0;
-}
-
 // ---------------------------------------------------------------------------
 // Output
 
@@ -438,14 +431,6 @@ void printSoftStats(const dsm::SoftShadowStats& s, std::size_t hierarchyTiles) {
               << " pixels, " << s.samplesHit << " samples hit, " << hierarchyTiles << " tiles in the hierarchy\n";
 }
 
-/// libdsm's message about the map, naming it as the user did: a map read from
-/// standard input is opened as a temporary copy, shown as "<stdin>".
-std::string mapMessage(std::string message, const InputFile& mapFile) {
-    if (mapFile.path() != mapFile.name() && isMapError(message, mapFile.path()))
-        message = "'" + mapFile.name() + "'" + message.substr(mapFile.path().size() + 2);
-    return message;
-}
-
 /// The options that belong to one query mode only.
 void checkSoftOptions(const CLI::App& app, const Options& o) {
     const auto given = [&app](const char* name) { return app.count(name) > 0; };
@@ -476,14 +461,17 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
     std::string inputName = "<stdin>";
     std::unique_ptr<InputFile> mapFile;
     std::shared_ptr<dsm::DeepShadowMap> map;
+    // Errors about the map name it as the user did: "<stdin>" for standard input.
+    const std::string mapName = o.map == "-" ? "<stdin>" : o.map;
+    DisplayNames displayNames;
     try {
         mapFile = std::make_unique<InputFile>(o.map);
+        addDisplayName(displayNames, *mapFile);
         dsm::ReaderOptions readerOptions;
         readerOptions.cache = dsm::TileCache::create(static_cast<std::size_t>(o.cacheMiB * 1024.0 * 1024.0));
         map = dsm::DeepShadowMap::open(mapFile->path(), readerOptions);
     } catch (const std::exception& e) {
-        if (!mapFile) reportError(kToolName, o.map == "-" ? "<stdin>" : o.map, exceptionMessage(e));
-        else reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
+        reportException(kToolName, e, mapName, displayNames);
         return kExitFailure;
     }
     if (!o.input.empty() && o.input != "-") {
@@ -495,7 +483,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
         try {
             requireRegularFile(o.input);  // a FIFO would block the open; standard input is "-"
         } catch (const dsm::Error& e) {
-            reportError(kToolName, o.input, e.what());
+            reportException(kToolName, e, o.input);
             return kExitFailure;
         }
         inputFile.open(o.input, std::ios::binary);
@@ -524,7 +512,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
             const dsm::AreaLight light = dsm::AreaLight::forMap(map->info(), size);
             tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
         } catch (const std::exception& e) {
-            reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
+            reportException(kToolName, e, mapName, displayNames);
             return kExitFailure;
         }
         dsm::SoftShadowOptions shadow;
@@ -552,7 +540,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
             stop = session.lines(queriesFromStdin ? *std::cin.rdbuf() : *inputFile.rdbuf(), inputName);
     } catch (const std::exception& e) {
         writer.flush();
-        reportError(kToolName, mapFile->name(), mapMessage(exceptionMessage(e), *mapFile));
+        reportException(kToolName, e, mapName, displayNames);
         stop = Stop::MapError;
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

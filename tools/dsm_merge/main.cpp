@@ -19,13 +19,6 @@ namespace {
 
 constexpr const char* kToolName = "dsm-merge";
 
-// The file a libdsm message is about: the one it starts with, quoted.
-std::string fileNamedBy(const std::string& message, const std::vector<std::string>& candidates) {
-    for (const std::string& file : candidates)
-        if (message.rfind("'" + file + "'", 0) == 0) return file;
-    return {};
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -62,8 +55,6 @@ int main(int argc, char** argv) {
     options.mode = mode == "stitch" ? dsm::MergeMode::Stitch : dsm::MergeMode::Product;
     if (app.count("--tolerance")) options.tolerance = tolerance;
     if (app.count("--zlib-level")) options.zlibLevel = zlibLevel;
-    std::vector<std::string> files = inputs;
-    files.push_back(output);
     try {
         const dsm::MergeReport r = dsm::mergeMaps(inputs, output, options);
         if (!quiet) {
@@ -80,8 +71,7 @@ int main(int argc, char** argv) {
                           << " (interpolation " << r.interpolationError << ") + recompression\n";
         }
     } catch (const std::exception& e) {
-        const std::string message = exceptionMessage(e);
-        reportError(kToolName, fileNamedBy(message, files), message);
+        reportException(kToolName, e);  // libdsm's error names the input or output it is about
         return kExitFailure;
     }
     return kExitOk;

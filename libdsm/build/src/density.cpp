@@ -173,7 +173,7 @@ openvdb::FloatGrid::ConstPtr loadFloatGrid(const VdbDensity& vdb) {
     const std::string where = "VDB file '" + detail::clip(vdb.file, detail::kMaxQuotedPath) + "'";
     std::error_code ec;
     if (!std::filesystem::is_regular_file(vdb.file, ec))
-        throw Error(ErrorCode::io, where + ": does not exist or is not a file");
+        throw Error(ErrorCode::io, where + ": does not exist or is not a file", vdb.file);
     openvdb::GridBase::Ptr base;
     try {
         openvdb::io::File file(vdb.file);
@@ -185,24 +185,26 @@ openvdb::FloatGrid::ConstPtr loadFloatGrid(const VdbDensity& vdb) {
             file.close();
             throw Error(ErrorCode::scene,
                         where + ": has no grid '" + detail::clip(vdb.grid) +
-                            "' (grids: " + detail::clip(names.empty() ? "none" : names, detail::kMaxQuotedPath) + ")");
+                            "' (grids: " + detail::clip(names.empty() ? "none" : names, detail::kMaxQuotedPath) + ")",
+                        vdb.file);
         }
         base = file.readGrid(vdb.grid);
         file.close();
     } catch (const openvdb::IoError& e) {
-        throw Error(ErrorCode::io, where + ": " + detail::clip(e.what()));
+        throw Error(ErrorCode::io, where + ": " + detail::clip(e.what()), vdb.file);
     } catch (const openvdb::Exception& e) {
-        throw Error(ErrorCode::format, where + ": " + detail::clip(e.what()));
+        throw Error(ErrorCode::format, where + ": " + detail::clip(e.what()), vdb.file);
     } catch (const std::bad_alloc&) {
-        throw Error(ErrorCode::limit, where + ": out of memory reading the grid");
+        throw Error(ErrorCode::limit, where + ": out of memory reading the grid", vdb.file);
     } catch (const std::exception& e) {
         if (dynamic_cast<const Error*>(&e)) throw;
-        throw Error(ErrorCode::format, where + ": " + detail::clip(e.what()));
+        throw Error(ErrorCode::format, where + ": " + detail::clip(e.what()), vdb.file);
     }
     openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
     if (!grid)
         throw Error(ErrorCode::scene, where + ": grid '" + detail::clip(vdb.grid) + "' holds " + base->valueType() +
-                                          " values; expected a float grid");
+                                          " values; expected a float grid",
+                    vdb.file);
     return grid;
 }
 
@@ -225,7 +227,8 @@ private:
 };
 #else
 [[noreturn]] void noOpenVdb(const VdbDensity& vdb) {
-    throw Error(ErrorCode::unsupported, "VDB file '" + vdb.file + "': this libdsm was built without OpenVDB");
+    throw Error(ErrorCode::unsupported, "VDB file '" + vdb.file + "': this libdsm was built without OpenVDB",
+                vdb.file);
 }
 #endif
 
@@ -260,7 +263,8 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
     const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
     if (box.empty())
         throw Error(ErrorCode::scene, "VDB file '" + detail::clip(vdb.file, detail::kMaxQuotedPath) + "': grid '" +
-                                          detail::clip(vdb.grid) + "' has no active voxels");
+                                          detail::clip(vdb.grid) + "' has no active voxels",
+                    vdb.file);
     const openvdb::Vec3d lo = box.min().asVec3d() - openvdb::Vec3d(1.0), hi = box.max().asVec3d() + openvdb::Vec3d(1.0);
     boundsMin = {HUGE_VAL, HUGE_VAL, HUGE_VAL};
     boundsMax = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};

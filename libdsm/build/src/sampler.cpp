@@ -95,7 +95,8 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     return e;
 }
 
-BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) {
+// Errors about the output (its checks, its writing) leave carrying its path.
+BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) try {
     const auto wallStart = Clock::now();
     LightDescription light = scene.light;
     if (options.width) light.width = *options.width;
@@ -312,6 +313,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     result.fileBytes = std::filesystem::file_size(path, ignored);
     result.wallSeconds = since(wallStart);
     return result;
+} catch (const Error& e) {
+    throw e.withFile(path);
 }
 
 DSM_NAMESPACE_END

@@ -196,7 +196,8 @@ public:
         throw Error(code, detail::concat(
                               "scene '", detail::clip(name_, detail::kMaxQuotedPath),
                               "': ", path.empty() ? std::string() : detail::clip(path, detail::kMaxQuotedPath) + ": ",
-                              message));
+                              message),
+                    name_);
     }
     [[noreturn]] void expected(const std::string& path, const std::string& what, const json& got) const {
         fail(path, "expected " + what + ", got " + describe(got));
@@ -1074,7 +1075,7 @@ Curves generateHairBall(const HairBallParameters& h) {
 
 Curves loadHairFile(const std::string& path) {
     auto fail = [&](ErrorCode code, const std::string& m) -> void {
-        throw Error(code, "hair file '" + detail::clip(path, detail::kMaxQuotedPath) + "': " + m);
+        throw Error(code, "hair file '" + detail::clip(path, detail::kMaxQuotedPath) + "': " + m, path);
     };
     std::error_code ec;
     if (!std::filesystem::is_regular_file(path, ec)) fail(ErrorCode::io, "does not exist or is not a file");
@@ -1194,10 +1195,10 @@ Scene readScene(std::istream& in, const std::string& baseDirectory, const std::s
         const auto got = static_cast<std::size_t>(in.gcount());
         if (got > options.maxBytes - std::min<std::uint64_t>(text.size(), options.maxBytes))
             throw Error(ErrorCode::limit,
-                        detail::concat(where, ": is more than the limit of ", options.maxBytes, " bytes"));
+                        detail::concat(where, ": is more than the limit of ", options.maxBytes, " bytes"), name);
         text.append(buffer.data(), got);
     }
-    if (in.bad()) throw Error(ErrorCode::io, where + ": read error");
+    if (in.bad()) throw Error(ErrorCode::io, where + ": read error", name);
     return parseScene(text, baseDirectory, name, options);
 }
 
@@ -1206,13 +1207,13 @@ Scene loadScene(const std::string& path, const SceneReadOptions& options) {
     std::error_code ec;
     // Not opened unless it is a regular file: opening a FIFO would block.
     if (!std::filesystem::is_regular_file(path, ec))
-        throw Error(ErrorCode::io, where + ": does not exist or is not a file");
+        throw Error(ErrorCode::io, where + ": does not exist or is not a file", path);
     const std::uint64_t size = std::filesystem::file_size(path, ec);
     if (!ec && size > options.maxBytes)
         throw Error(ErrorCode::limit,
-                    detail::concat(where, ": is ", size, " bytes, more than the limit of ", options.maxBytes));
+                    detail::concat(where, ": is ", size, " bytes, more than the limit of ", options.maxBytes), path);
     std::ifstream in(path, std::ios::binary);
-    if (!in) throw Error(ErrorCode::io, where + ": cannot open: " + std::strerror(errno));
+    if (!in) throw Error(ErrorCode::io, where + ": cannot open: " + std::strerror(errno), path);
     return readScene(in, std::filesystem::path(path).parent_path().string(), path, options);
 }
 

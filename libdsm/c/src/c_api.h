@@ -32,6 +32,7 @@ struct dsm_pixel {
 
 struct dsm_lookup_context {
     std::unique_ptr<dsm::LookupContext> context;
+    std::string mapPath;  ///< what the map's failures name (dsm_last_error_file)
 };
 
 struct dsm_shadow_system {
@@ -58,8 +59,13 @@ namespace dsm::c {
 /// The dsm_result of an ErrorCode.
 dsm_result resultOf(ErrorCode code) noexcept;
 
-/// Records a failure for the calling thread and the error callback; returns `result`.
+/// Records a failure about `file` (dsm_last_error_file; NULL: none) for the
+/// calling thread and the error callback; returns `result`.
+dsm_result failNaming(dsm_result result, const char* message, const char* file) noexcept;
+/// failNaming() naming no file.
 dsm_result fail(dsm_result result, const char* message) noexcept;
+/// failNaming() with the code, message and file of a dsm::Error.
+dsm_result fail(const Error& error) noexcept;
 inline dsm_result fail(ErrorCode code, const char* message) noexcept { return fail(resultOf(code), message); }
 
 /// Runs `body` (which returns dsm_result); any exception becomes a result and
@@ -69,7 +75,7 @@ dsm_result guarded(Body&& body) noexcept {
     try {
         return body();
     } catch (const Error& e) {
-        return fail(e.code(), e.what());
+        return fail(e);
     } catch (const std::bad_alloc&) {
         return fail(DSM_ERROR_LIMIT, "out of memory");
     } catch (const std::exception& e) {

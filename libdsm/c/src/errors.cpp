@@ -11,6 +11,7 @@ namespace {
 struct LastFailure {
     dsm_result result = DSM_OK;
     std::string message;
+    std::string file;  ///< dsm::Error::file(): empty when the failure names no file
 };
 
 LastFailure& lastFailure() noexcept {
@@ -46,13 +47,15 @@ dsm_result resultOf(ErrorCode code) noexcept {
     return DSM_ERROR_INTERNAL;
 }
 
-dsm_result fail(dsm_result result, const char* message) noexcept {
+dsm_result failNaming(dsm_result result, const char* message, const char* file) noexcept {
     LastFailure& last = lastFailure();
     last.result = result;
     try {
         last.message = message ? message : "";
+        last.file = file ? file : "";
     } catch (...) {
         last.message.clear();  // out of memory: the code alone must do
+        last.file.clear();
     }
     dsm_error_callback callback = nullptr;
     void* user = nullptr;
@@ -63,6 +66,12 @@ dsm_result fail(dsm_result result, const char* message) noexcept {
     }
     if (callback) callback(user, result, last.message.c_str());
     return result;
+}
+
+dsm_result fail(dsm_result result, const char* message) noexcept { return failNaming(result, message, nullptr); }
+
+dsm_result fail(const Error& error) noexcept {
+    return failNaming(resultOf(error.code()), error.what(), error.file().c_str());
 }
 
 dsm_result fail(dsm_result result, const char* function, const char* what) noexcept {
@@ -111,12 +120,15 @@ const char* dsm_result_name(dsm_result result) {
 
 const char* dsm_last_error_message(void) { return dsm::c::lastFailure().message.c_str(); }
 
+const char* dsm_last_error_file(void) { return dsm::c::lastFailure().file.c_str(); }
+
 dsm_result dsm_last_error(void) { return dsm::c::lastFailure().result; }
 
 void dsm_clear_last_error(void) {
     dsm::c::LastFailure& last = dsm::c::lastFailure();
     last.result = DSM_OK;
     last.message.clear();
+    last.file.clear();
 }
 
 void dsm_set_error_callback(dsm_error_callback callback, void* user) {

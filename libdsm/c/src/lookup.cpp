@@ -15,6 +15,7 @@ dsm_result dsm_lookup_context_create(const dsm_map* map, dsm_lookup_context** co
         if (!context) return missing("dsm_lookup_context_create", "context");
         auto handle = std::make_unique<dsm_lookup_context>();
         handle->context = std::make_unique<dsm::LookupContext>(map->map);
+        handle->mapPath = map->map->path();
         *context = handle.release();
         return DSM_OK;
     });
@@ -49,7 +50,8 @@ dsm_result dsm_lookup(dsm_lookup_context* context, const dsm_lookup_options* opt
                 ok = c.tryRaster(p[0], p[1], p[2], lookup, result);
                 break;
             }
-            if (!ok && first == DSM_OK) first = fail(c.lastFailure().code, c.lastFailure().message.c_str());
+            if (!ok && first == DSM_OK)  // the failure names the map when it is about it (a tile that cannot be read)
+                first = fail(dsm::Error(c.lastFailure().code, c.lastFailure().message).withFile(context->mapPath));
             for (std::size_t k = 0; k < 3; ++k) visibility[3 * i + k] = result.v[k];
             if (error_bounds) error_bounds[i] = result.errorBound;
         }

@@ -8,6 +8,7 @@
 #include "c_api.h"
 
 using dsm::c::fail;
+using dsm::c::failNaming;
 using dsm::c::guarded;
 using dsm::c::missing;
 
@@ -144,9 +145,11 @@ dsm_result dsm_map_get_level(const dsm_map* map, uint32_t level, dsm_level_info*
         if (!info) return missing("dsm_map_get_level", "info");
         const dsm::MapInfo& m = map->map->info();
         if (level >= m.levels.size())
-            return fail(DSM_ERROR_ARGUMENT, ("'" + map->map->path() + "': level " + std::to_string(level) +
-                                             " does not exist (" + std::to_string(m.levels.size()) + " levels)")
-                                                .c_str());
+            return failNaming(DSM_ERROR_ARGUMENT,
+                              ("'" + map->map->path() + "': level " + std::to_string(level) + " does not exist (" +
+                               std::to_string(m.levels.size()) + " levels)")
+                                  .c_str(),
+                              map->map->path().c_str());
         const dsm::LevelInfo& L = m.levels[level];
         *info = dsm_level_info{L.width,      L.height,      L.tilesX,         L.tilesY,     L.tolerance,
                                L.errorBound, L.vertexCount, L.nonEmptyPixels, L.storedBytes};

@@ -84,7 +84,7 @@ dsm_result dsm_soft_shadow(dsm_soft_context* context, const dsm_soft_shadow_opti
                 result = o.method == DSM_SOFT_PCF ? c.pcfVisibility(p, soft) : c.visibility(p, soft);
             } catch (const dsm::Error& e) {
                 result = dsm::SoftShadowResult{};  // the failure value: lit, no rays
-                if (first == DSM_OK) first = fail(e.code(), e.what());
+                if (first == DSM_OK) first = fail(e);
             }
             for (std::size_t k = 0; k < 3; ++k) visibility[3 * i + k] = result.v[k];
             if (rays) rays[i] = result.rays;

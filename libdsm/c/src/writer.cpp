@@ -9,6 +9,7 @@
 #include "c_api.h"
 
 using dsm::c::fail;
+using dsm::c::failNaming;
 using dsm::c::guarded;
 using dsm::c::missing;
 
@@ -67,9 +68,11 @@ dsm_result checkPixel(const dsm_writer* w, uint32_t x, uint32_t y, const char* f
     if (!w) return missing(function, "writer");
     if (w->done) return fail(DSM_ERROR_ARGUMENT, function, ("'" + w->path + "': the writer is finished").c_str());
     if (x >= w->options.width || y >= w->options.height)
-        return fail(DSM_ERROR_ARGUMENT, (pixelWhere(*w, x, y) + ": outside the " + std::to_string(w->options.width) +
-                                         "x" + std::to_string(w->options.height) + " map")
-                                            .c_str());
+        return failNaming(DSM_ERROR_ARGUMENT,
+                          (pixelWhere(*w, x, y) + ": outside the " + std::to_string(w->options.width) + "x" +
+                           std::to_string(w->options.height) + " map")
+                              .c_str(),
+                          w->path.c_str());
     return DSM_OK;
 }
 

@@ -90,24 +90,28 @@ void checkOutputPath(const std::string& path) {
     const std::string where = quoted(path);
     const std::string name = fileNameOf(path);
     if (path.back() == '/' || name == "." || name == "..")
-        throw Error(ErrorCode::argument, concat(where, ": names a directory; name a file to write"));
+        throw Error(ErrorCode::argument, concat(where, ": names a directory; name a file to write"), path);
     struct stat st {};
     if (::stat(path.c_str(), &st) == 0) {
         if (S_ISDIR(st.st_mode))
-            throw Error(ErrorCode::argument, concat(where, ": is a directory; name a file to write"));
+            throw Error(ErrorCode::argument, concat(where, ": is a directory; name a file to write"), path);
         if (!S_ISREG(st.st_mode))
             throw Error(ErrorCode::argument,
-                        concat(where, ": is not a regular file (a device, FIFO or socket); name a file to write"));
+                        concat(where, ": is not a regular file (a device, FIFO or socket); name a file to write"),
+                        path);
     }
     const std::string directory = directoryOf(path);
     if (::stat(directory.c_str(), &st) != 0)
         throw Error(ErrorCode::io, concat(where, ": cannot write in the directory '", directory, "': ",
-                                          std::strerror(errno)));
+                                          std::strerror(errno)),
+                    path);
     if (!S_ISDIR(st.st_mode))
-        throw Error(ErrorCode::io, concat(where, ": cannot write there: '", directory, "' is not a directory"));
+        throw Error(ErrorCode::io, concat(where, ": cannot write there: '", directory, "' is not a directory"),
+                    path);
     if (::access(directory.c_str(), W_OK | X_OK) != 0)
         throw Error(ErrorCode::io, concat(where, ": cannot write in the directory '", directory, "': ",
-                                          std::strerror(errno)));
+                                          std::strerror(errno)),
+                    path);
 }
 
 void refuseOutputOverInputs(const std::string& output, const std::vector<std::string>& inputs) {
@@ -118,7 +122,8 @@ void refuseOutputOverInputs(const std::string& output, const std::vector<std::st
             throw Error(ErrorCode::argument,
                         input == output ? concat(quoted(output), ": the output is also an input; write to another file")
                                         : concat(quoted(output), ": the output is the same file as the input '", input,
-                                                 "'; write to another file"));
+                                                 "'; write to another file"),
+                        output);
 }
 
 void refuseSharedOutputs(const std::vector<std::string>& outputs) {
@@ -126,7 +131,8 @@ void refuseSharedOutputs(const std::vector<std::string>& outputs) {
         for (std::size_t j = i + 1; j < outputs.size(); ++j)
             if (outputIdentity(outputs[i]) == outputIdentity(outputs[j]))
                 throw Error(ErrorCode::argument, concat(quoted(outputs[j]), ": is also the output '", outputs[i],
-                                                        "'; give each output its own file"));
+                                                        "'; give each output its own file"),
+                                outputs[j]);
 }
 
 std::vector<std::string> staleTemporaries(const std::string& path, std::int64_t minimumAgeSeconds) {
@@ -172,7 +178,9 @@ OutputFile::~OutputFile() {
     if (!committed_ && !temporary_.empty()) ::unlink(temporary_.c_str());
 }
 
-void OutputFile::fail(const std::string& what) const { throw Error(ErrorCode::io, concat(quoted(path_), ": ", what)); }
+void OutputFile::fail(const std::string& what) const {
+    throw Error(ErrorCode::io, concat(quoted(path_), ": ", what), path_);
+}
 
 void OutputFile::flushBuffer() {
     if (buffer_.empty()) return;

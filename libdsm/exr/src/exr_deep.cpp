@@ -51,6 +51,7 @@
 #include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/writer.h"
+#include "naming_file.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -589,8 +590,10 @@ struct Band {
 
 }  // namespace
 
+// Both entry points attach to their errors the file each one names (the map or
+// the image), whichever step below raised it.
 ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
-                              const ExrExportOptions& options) {
+                              const ExrExportOptions& options) try {
     checkErrorBoundOption(options.maxDeviation, "deep EXR export: the largest deviation");
     checkOutputPath(exrPath);
     refuseOutputOverInputs(exrPath, {dsmPath});
@@ -715,6 +718,8 @@ ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exr
     for (double v : largest) report.largestDeviation = std::max(report.largestDeviation, v);
     for (std::uint64_t n : oneStep) report.oneStepExcess += n;
     return report;
+} catch (const Error& e) {
+    throw detail::withOneOf(e, {dsmPath, exrPath});
 }
 
 namespace {
@@ -1091,7 +1096,7 @@ LightCamera cameraFromWidth(const Imf::Header& h, const ExrImportOptions& option
 }  // namespace
 
 ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
-                              const ExrImportOptions& options) {
+                              const ExrImportOptions& options) try {
     checkErrorBoundOption(options.maxLinearError, "deep EXR import: the linearisation error");
     if (options.tolerance && !(std::isfinite(*options.tolerance) && *options.tolerance >= 0.0))
         throw Error(ErrorCode::argument, concat("deep EXR import: the tolerance must be a finite value >= 0, got ",
@@ -1205,6 +1210,8 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
     } catch (const std::exception& e) {
         throw Error(ErrorCode::io, concat(quoted(exrPath), ": ", e.what()));
     }
+} catch (const Error& e) {
+    throw detail::withOneOf(e, {exrPath, dsmPath});
 }
 
 DSM_NAMESPACE_END

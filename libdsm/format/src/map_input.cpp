@@ -23,16 +23,16 @@ public:
         // O_NONBLOCK: opening a FIFO would otherwise wait for a writer forever.
         // It is refused below, and means nothing for the regular file we keep.
         fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-        if (fd_ < 0) throw Error(ErrorCode::io, concat("'", path, "': cannot open: ", std::strerror(errno)));
+        if (fd_ < 0) throw Error(ErrorCode::io, concat("'", path, "': cannot open: ", std::strerror(errno)), path);
         struct stat st {};
         if (::fstat(fd_, &st) != 0) {
             const int reason = errno;
             ::close(fd_);
-            throw Error(ErrorCode::io, concat("'", path, "': cannot stat: ", std::strerror(reason)));
+            throw Error(ErrorCode::io, concat("'", path, "': cannot stat: ", std::strerror(reason)), path);
         }
         if (!S_ISREG(st.st_mode)) {
             ::close(fd_);
-            throw Error(ErrorCode::io, concat("'", path, "': not a regular file"));
+            throw Error(ErrorCode::io, concat("'", path, "': not a regular file"), path);
         }
         ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK);
         size_ = static_cast<std::uint64_t>(st.st_size);

@@ -6,6 +6,7 @@
 
 #include "dsm/error.h"
 #include "format_layout.h"
+#include "naming_file.h"
 #include "text.h"
 #include "tile_cache_impl.h"
 #include "tile_codec.h"
@@ -14,6 +15,7 @@
 DSM_NAMESPACE_BEGIN
 
 using detail::concat;
+using detail::namingFile;
 
 void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const std::string& name,
                                     const ReaderOptions& o) {
@@ -126,7 +128,8 @@ void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const st
 std::shared_ptr<const format::DecodedTile> DeepShadowMap::Impl::getTile(unsigned level, std::uint32_t tx,
                                                                         std::uint32_t ty) const {
     const TileKey key{fileId, level, ty * info.levels[level].tilesX + tx};
-    return ImplAccess::of(*cache).get<format::DecodedTile>(key, [&] { return loadTile(level, tx, ty); });
+    return ImplAccess::of(*cache).get<format::DecodedTile>(
+        key, [&] { return namingFile(path, [&] { return loadTile(level, tx, ty); }); });
 }
 
 DeepShadowMap::DeepShadowMap() : impl_(std::make_unique<Impl>()) {}
@@ -134,14 +137,14 @@ DeepShadowMap::~DeepShadowMap() = default;
 
 std::shared_ptr<DeepShadowMap> DeepShadowMap::open(const std::string& path, const ReaderOptions& options) {
     std::shared_ptr<DeepShadowMap> map(new DeepShadowMap());
-    map->impl_->openInput(MapInput::file(path), path, options);
+    namingFile(path, [&] { map->impl_->openInput(MapInput::file(path), path, options); });
     return map;
 }
 
 std::shared_ptr<DeepShadowMap> DeepShadowMap::open(std::shared_ptr<const MapInput> input, const std::string& name,
                                                    const ReaderOptions& options) {
     std::shared_ptr<DeepShadowMap> map(new DeepShadowMap());
-    map->impl_->openInput(std::move(input), name, options);
+    namingFile(name, [&] { map->impl_->openInput(std::move(input), name, options); });
     return map;
 }
 
@@ -153,11 +156,13 @@ PixelFunction DeepShadowMap::pixel(unsigned level, std::uint32_t x, std::uint32_
     const Impl& s = *impl_;
     if (level >= s.info.levels.size())
         throw Error(ErrorCode::argument,
-                    concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
+                    concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"),
+                    s.path);
     const LevelInfo& L = s.info.levels[level];
     if (x >= L.width || y >= L.height)
         throw Error(ErrorCode::argument,
-                    concat(s.where(), " level ", level, ": pixel ", x, ",", y, " is outside ", L.width, "x", L.height));
+                    concat(s.where(), " level ", level, ": pixel ", x, ",", y, " is outside ", L.width, "x", L.height),
+                    s.path);
     const std::uint32_t tx = x / s.info.tileSize, ty = y / s.info.tileSize;
     auto tile = s.getTile(level, tx, ty);
     const std::uint32_t w = s.tileExtent(L.width, tx);
@@ -172,15 +177,19 @@ TileSummary DeepShadowMap::tile(unsigned level, std::uint32_t tx, std::uint32_t 
     const Impl& s = *impl_;
     if (level >= s.info.levels.size())
         throw Error(ErrorCode::argument,
-                    concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"));
+                    concat(s.where(), ": level ", level, " does not exist (", s.info.levels.size(), " levels)"),
+                    s.path);
     const LevelInfo& L = s.info.levels[level];
     if (tx >= L.tilesX || ty >= L.tilesY)
         throw Error(ErrorCode::argument, concat(s.where(), " level ", level, ": tile ", tx, ",", ty, " is outside ",
-                                                L.tilesX, "x", L.tilesY));
+                                                L.tilesX, "x", L.tilesY),
+                    s.path);
     return s.directories[level][std::size_t(ty) * L.tilesX + tx];
 }
 
-void validate(const std::string& path, const ReaderOptions& options) { validate(MapInput::file(path), path, options); }
+void validate(const std::string& path, const ReaderOptions& options) {
+    namingFile(path, [&] { validate(MapInput::file(path), path, options); });
+}
 
 void validate(std::shared_ptr<const MapInput> input, const std::string& name, const ReaderOptions& options) {
     ReaderOptions uncached = options;
@@ -189,7 +198,8 @@ void validate(std::shared_ptr<const MapInput> input, const std::string& name, co
     const auto& s = ImplAccess::of(*map);
     for (unsigned l = 0; l < s.info.levels.size(); ++l)
         for (std::uint32_t ty = 0; ty < s.info.levels[l].tilesY; ++ty)
-            for (std::uint32_t tx = 0; tx < s.info.levels[l].tilesX; ++tx) s.loadTile(l, tx, ty);
+            for (std::uint32_t tx = 0; tx < s.info.levels[l].tilesX; ++tx)
+                namingFile(name, [&] { s.loadTile(l, tx, ty); });
 }
 
 DSM_NAMESPACE_END

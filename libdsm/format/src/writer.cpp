@@ -125,7 +125,9 @@ struct MapWriter::Impl {
     }
 };
 
-MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : impl_(std::make_unique<Impl>()) {
+// The public members below attach the output's path to the errors they raise
+// (Error::withFile), whichever step below raised them.
+MapWriter::MapWriter(const std::string& path, const WriterOptions& options) try : impl_(std::make_unique<Impl>()) {
     Impl& s = *impl_;
     s.path = path;
     s.options = options;
@@ -177,6 +179,8 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) : im
     s.file = std::make_unique<OutputFile>(path);
     const std::vector<std::uint8_t> placeholder(format::kHeaderSize, 0);
     s.writeBytes(placeholder.data(), placeholder.size());
+} catch (const Error& e) {
+    throw e.withFile(path);
 }
 
 MapWriter::~MapWriter() = default;
@@ -190,7 +194,7 @@ std::uint32_t MapWriter::tileHeight(std::uint32_t ty) const {
     return impl_->tileExtent(impl_->levels[0].info.height, ty);
 }
 
-void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels) {
+void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels) try {
     Impl& s = *impl_;
     const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
     if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
@@ -221,9 +225,11 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const Visibil
     }
     std::vector<VisibilityFunction> copy(pixels.begin(), pixels.end());
     s.acceptTile(0, tx, ty, copy);
+} catch (const Error& e) {
+    throw e.withFile(impl_->path);
 }
 
-void MapWriter::finish() {
+void MapWriter::finish() try {
     Impl& s = *impl_;
     if (s.finished) throw Error(ErrorCode::argument, concat(s.where(), ": finish() called twice"));
     for (std::uint32_t ty = 0; ty < tilesY(); ++ty)
@@ -273,6 +279,8 @@ void MapWriter::finish() {
     s.file->writeAt(0, headerBytes.data(), headerBytes.size());
     s.file->commit();
     s.finished = true;
+} catch (const Error& e) {
+    throw e.withFile(impl_->path);
 }
 
 DSM_NAMESPACE_END

@@ -23,7 +23,8 @@ const LevelInfo& levelOf(const DeepShadowMap& map, unsigned level) {
     const auto& levels = map.info().levels;
     if (level >= levels.size())
         throw Error(ErrorCode::argument, concat("'", map.path(), "': level ", level, " does not exist (", levels.size(),
-                                                levels.size() == 1 ? " level)" : " levels)"));
+                                                levels.size() == 1 ? " level)" : " levels)"),
+                    map.path());
     return levels[level];
 }
 
@@ -60,7 +61,7 @@ FloatImage visibilityAt(const DeepShadowMap& map, unsigned level, double z) {
 }  // namespace
 
 FloatImage visibilitySlice(const DeepShadowMap& map, unsigned level, double z) {
-    if (std::isnan(z)) throw Error(ErrorCode::argument, concat("'", map.path(), "': slice depth is NaN"));
+    if (std::isnan(z)) throw Error(ErrorCode::argument, concat("'", map.path(), "': slice depth is NaN"), map.path());
     return visibilityAt(map, level, z);
 }
 

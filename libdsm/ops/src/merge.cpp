@@ -24,6 +24,7 @@
 #include "dsm/reader.h"
 #include "dsm/visibility_product.h"
 #include "dsm/writer.h"
+#include "naming_file.h"
 #include "text.h"
 #include "tile_codec.h"
 
@@ -492,7 +493,9 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
 
 }  // namespace
 
-MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string& output, const MergeOptions& options) {
+// An error about one input or the output leaves carrying that file.
+MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string& output,
+                      const MergeOptions& options) try {
     checkOutput(inputs, output);
     if (options.zlibLevel && (*options.zlibLevel < 0 || *options.zlibLevel > 9))
         throw Error(ErrorCode::argument, concat("merge: zlib level ", *options.zlibLevel, " is not in [0, 9]"));
@@ -502,6 +505,10 @@ MergeReport mergeMaps(const std::vector<std::string>& inputs, const std::string&
         case MergeMode::Stitch: return stitchMaps(maps, output, options);
     }
     throw Error(ErrorCode::argument, "merge: unknown mode");
+} catch (const Error& e) {
+    std::vector<std::string> files = inputs;
+    files.push_back(output);
+    throw detail::withOneOf(e, files);
 }
 
 DSM_NAMESPACE_END

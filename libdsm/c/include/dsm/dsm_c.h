@@ -62,6 +62,12 @@ DSM_C_API const char* dsm_result_name(dsm_result result);
 /** The message of the last call on this thread that failed ("" if none has).
  *  Valid until the next failing call on this thread. */
 DSM_C_API const char* dsm_last_error_message(void);
+/** The file the last failure on this thread concerns, as the caller named it
+ *  (the path given to dsm_map_open, the name given with a buffer or callbacks,
+ *  a writer's output path); "" when it names no file or none has failed.
+ *  dsm_last_error_message() then starts with this file, quoted. Valid until
+ *  the next failing call on this thread. */
+DSM_C_API const char* dsm_last_error_file(void);
 /** The code of the last call on this thread that failed (DSM_OK if none has). */
 DSM_C_API dsm_result dsm_last_error(void);
 /** Forgets this thread's last failure. */
