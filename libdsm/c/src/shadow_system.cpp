@@ -127,9 +127,9 @@ dsm_result dsm_shadow_lookup(dsm_shadow_thread* thread, const dsm_map_handle* ha
             }
             const std::size_t failures = thread->system->lookup(*thread->thread, toHandle(handle), space,
                                                                 thread->points, lookup, thread->results);
-            if (failures > 0 && first == DSM_OK) {
+            if (failures > 0 && first == DSM_OK) {  // names the map when it is about it, as dsm_lookup
                 const dsm::LookupFailure& why = thread->thread->lastFailure();
-                first = fail(why.code, why.message.c_str());
+                first = fail(dsm::Error(why.code, why.message).withFile(thread->system->map(toHandle(handle))->path()));
             }
             for (std::size_t i = 0; i < n; ++i) {
                 const dsm::LookupResult& r = thread->results[i];
