@@ -834,7 +834,7 @@ TEST(TileCache, HitCostIsPrinted) {
     // The cost of a hit, every tile resident, one thread and two threads each
     // cycling over the tiles (figures only: timing depends on the machine).
     constexpr std::uint32_t kTiles = 4096;
-    constexpr int kRequests = 400000;
+    constexpr int kRequests = 200000;
     auto cache = TileCache::create(std::size_t(1) << 30);
     auto& inside = ImplAccess::of(*cache);
     const std::uint64_t f = inside.newFileId();
