@@ -189,13 +189,16 @@ private:
     std::deque<std::pair<TileKey, std::uint64_t>> order_;
 };
 
+// A hit writes only the mutex and the counters, which come first so that they
+// share a cache line (with another thread's hits that line moves between
+// cores; the map's own lines are only read).
 struct alignas(64) Shard {
     std::mutex mutex;
-    std::condition_variable settled;  // an in-flight entry of this shard got its data or error
-    std::unordered_map<TileKey, std::shared_ptr<Entry>, TileKeyHash> entries;
     std::uint64_t hits = 0;
     std::uint64_t waits = 0;
     std::uint64_t misses = 0;
+    std::condition_variable settled;  // an in-flight entry of this shard got its data or error
+    std::unordered_map<TileKey, std::shared_ptr<Entry>, TileKeyHash> entries;
 };
 
 }  // namespace
