@@ -6,6 +6,7 @@
 #include <cstdint>
 #include <memory>
 #include <type_traits>
+#include <utility>
 
 #include "dsm/tile_cache.h"
 #include "tested_internal.h"
