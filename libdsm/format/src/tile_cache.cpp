@@ -351,21 +351,24 @@ struct TileCache::Impl::State {
             std::lock_guard evictionLock(evictionMutex);
             const std::optional<std::uint64_t> previousUse = ghosts.take(entry->key);
             makeRoom(loaded.memoryBytes, dropped);
-            const std::uint64_t now = epoch.load(std::memory_order_relaxed) + 1;
-            epoch.store(now, std::memory_order_relaxed);
-            entry->memoryBytes = loaded.memoryBytes;
-            entry->lastUse.store(now, std::memory_order_relaxed);
-            admit(entry.get(), previousUse, now);
+            std::lock_guard lock(shard.mutex);  // the last step that may throw
             ++stats.tilesRead;
             stats.bytesRead += loaded.fileBytes;
-            stats.bytesInUse += loaded.memoryBytes;
-            ++stats.tilesInUse;
-            notePeaks();
-            std::lock_guard lock(shard.mutex);
-            auto it = shard.entries.find(entry->key);
-            if (it == shard.entries.end() || it->second != entry) ++stats.duplicateReads;  // never, by design
             entry->data = loaded.data;
             entry->loader = {};
+            auto it = shard.entries.find(entry->key);
+            if (it != shard.entries.end() && it->second == entry) {
+                const std::uint64_t now = epoch.load(std::memory_order_relaxed) + 1;
+                epoch.store(now, std::memory_order_relaxed);
+                entry->memoryBytes = loaded.memoryBytes;
+                entry->lastUse.store(now, std::memory_order_relaxed);
+                admit(entry.get(), previousUse, now);
+                stats.bytesInUse += loaded.memoryBytes;
+                ++stats.tilesInUse;
+                notePeaks();
+            } else {
+                ++stats.duplicateReads;  // never: an in-flight entry leaves only through its reader
+            }
         }
         shard.settled.notify_all();
     }
@@ -433,8 +436,8 @@ std::shared_ptr<const void> TileCache::Impl::get(const TileKey& key, TileLoadFun
         s.complete(shard, entry, loaded);
         return std::move(loaded.data);
     } catch (...) {
-        // complete() changes nothing visible before its last, non-throwing
-        // step, so a failure anywhere leaves the entry in flight: fail it.
+        // Whatever throws (the loader, or complete() before it changes
+        // anything) leaves the entry in flight: fail it.
         s.fail(shard, entry, std::current_exception());
         throw;
     }
