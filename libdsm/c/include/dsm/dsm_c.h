@@ -81,8 +81,8 @@ DSM_C_API void dsm_set_error_callback(dsm_error_callback callback, void* user);
 
 /* ---------------------------------------------------------------- cache */
 
-/** Decoded tiles, shared by the maps opened with it, least recently used out
- *  once `budget_bytes` are held. Maps opened without a cache share a
+/** Decoded tiles, shared by the maps opened with it, evicted once
+ *  `budget_bytes` are held (tiles in repeated use last; see dsm::TileCache). Maps opened without a cache share a
  *  process-wide one. A map keeps its cache alive: a cache may be destroyed
  *  while maps opened with it are still open. */
 typedef struct dsm_cache dsm_cache;
