@@ -121,7 +121,7 @@ TEST(ShadowSystem, EightThreadsAgreeWithOneUnderASmallBudget) {
     options.threadTiles = 4;
     auto system = ShadowSystem::create(options);
     MapHandle* handle = system->open(path);
-    const auto pts = pointsFor(system->map(handle)->info(), LookupSpace::raster, 9, 3000);
+    const auto pts = pointsFor(system->map(handle)->info(), LookupSpace::raster, 9, 600);
     LookupOptions o;
     o.filter = PixelFilter::Gaussian;
     o.filterWidth = 3.0;
@@ -137,7 +137,7 @@ TEST(ShadowSystem, EightThreadsAgreeWithOneUnderASmallBudget) {
         threads.emplace_back([&, t] {
             auto state = system->createThread();
             std::vector<LookupResult> got(pts.size());
-            for (int rep = 0; rep < 3; ++rep) {
+            for (int rep = 0; rep < 2; ++rep) {
                 if ((t + rep) % 2) {
                     system->lookup(*state, handle, LookupSpace::raster, pts, o, got);
                 } else {
