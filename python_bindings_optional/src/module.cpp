@@ -84,6 +84,13 @@ py::array_t<double> valuesArray(const std::vector<double>& values, int channels)
     return out;
 }
 
+/// Points per batched lookup. A batch visits its points tile by tile, which
+/// pays more the more points share a tile, but its sort and scattered writes
+/// slow down once they leave the processor's caches: two million random
+/// points in one batch ran slower than point by point, in batches of 2^18
+/// about 1.5x faster.
+constexpr std::size_t kBatchPoints = std::size_t(1) << 18;
+
 unsigned workerCount(int threads, std::size_t work) {
     const unsigned n = dsm::usableThreads(threads > 0 ? static_cast<unsigned>(threads) : 0u);
     // Below a few thousand points a thread costs more than it saves.
@@ -217,16 +224,19 @@ public:
             py::gil_scoped_release released;
             parallelChunks(n, workerCount(threads, n), [&](std::size_t begin, std::size_t end) {
                 const std::unique_ptr<dsm::ShadowThread> thread = system_->createThread();
-                std::vector<dsm::LookupResult> results(end - begin);
-                const dsm::Span<const Point> chunk(input.data() + begin, end - begin);
-                if (system_->lookup(*thread, handle_, where, chunk, options, results) != 0) {
-                    const dsm::LookupFailure& failure = thread->lastFailure();
-                    throw dsm::Error(failure.code, failure.message);
-                }
-                for (std::size_t i = begin; i < end; ++i) {
-                    const dsm::LookupResult& r = results[i - begin];
-                    for (int c = 0; c < channels; ++c) values[i * channels + c] = r.v[c];
-                    bounds[i] = r.errorBound;
+                std::vector<dsm::LookupResult> results(std::min(end - begin, kBatchPoints));
+                for (std::size_t first = begin; first < end; first += kBatchPoints) {
+                    const std::size_t count = std::min(end - first, kBatchPoints);
+                    const dsm::Span<const Point> batch(input.data() + first, count);
+                    if (system_->lookup(*thread, handle_, where, batch, options, results) != 0) {
+                        const dsm::LookupFailure& failure = thread->lastFailure();
+                        throw dsm::Error(failure.code, failure.message);
+                    }
+                    for (std::size_t i = first; i < first + count; ++i) {
+                        const dsm::LookupResult& r = results[i - first];
+                        for (int c = 0; c < channels; ++c) values[i * channels + c] = r.v[c];
+                        bounds[i] = r.errorBound;
+                    }
                 }
             });
         }

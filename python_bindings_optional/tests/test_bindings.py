@@ -95,6 +95,23 @@ def test_large_batch_equals_lookups_one_point_at_a_time(cards_map):
         assert np.any(batch < 0.5) and np.any(batch == 1.0)
 
 
+def test_lookups_of_more_points_than_one_batch(cards_map):
+    # More than 2^18 points per thread: looked up in several batches.
+    m = dsm.open(cards_map)
+    rng = np.random.default_rng(18)
+    n = 600000
+    pts = np.column_stack([rng.uniform(-2, 66, n), rng.uniform(-2, 66, n), rng.uniform(0, 6, n)])
+    whole, bounds = m.lookup(pts, space="raster", filter_width=2.0, error_bound=True, threads=1)
+    step = 7919
+    parts = [m.lookup(pts[i:i + step], space="raster", filter_width=2.0, error_bound=True, threads=1)
+             for i in range(0, n, step)]
+    assert np.array_equal(whole, np.concatenate([v for v, _ in parts]))
+    assert np.array_equal(bounds, np.concatenate([b for _, b in parts]))
+    pts[590000] = (1.0, 2.0, np.inf)
+    with pytest.raises(dsm.Error, match="lookup: point 1,2 at depth inf is not finite"):
+        m.lookup(pts, space="raster", threads=1)
+
+
 def test_lookup_failure_in_a_batch_raises_dsm_error(cards_map):
     m = dsm.open(cards_map)
     rng = np.random.default_rng(3)
