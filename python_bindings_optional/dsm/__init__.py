@@ -106,7 +106,10 @@ class Map:
         level: "auto" (trilinear mip-mapping) or a level number; bias is
         subtracted from the depth. Returns an (N,) array for a monochrome map,
         (N, 3) for RGB; with error_bound=True a tuple (values, bounds).
-        threads: 0 = all cores; more than the cores are clamped to them.
+        threads: 0 = all cores; more than the cores are clamped to them. Each
+        thread looks up its share of the points in one batch (tile by tile,
+        answers identical to single lookups); a point that cannot be looked
+        up raises Error with the reason.
         """
         values, bounds = self._map.lookup(np.asarray(points, dtype=np.float64), space, filter, float(filter_width),
                                           level, float(bias), int(threads))

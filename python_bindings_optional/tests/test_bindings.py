@@ -76,6 +76,56 @@ def test_lookup_error_bounds_and_threads_agree(cards_map):
     assert np.all(b1 >= m.levels[0]["tolerance"])
 
 
+def test_large_batch_equals_lookups_one_point_at_a_time(cards_map):
+    m = dsm.open(cards_map)
+    rng = np.random.default_rng(14)
+    n = 20000
+    # World points over the cards and the ground, some outside the light's view.
+    pts = np.column_stack([rng.uniform(-4, 4, n), rng.uniform(-0.5, 2.5, n), rng.uniform(-4, 4, n)])
+    for options in ({"filter_width": 1.0}, {"filter_width": 5.0, "filter": "gaussian"},
+                    {"filter_width": 3.0, "filter": "triangle", "level": 1, "bias": 0.01}):
+        batch, bounds = m.lookup(pts, error_bound=True, threads=2, **options)
+        single = np.empty(n)
+        single_bounds = np.empty(n)
+        for i in range(n):
+            v, b = m.lookup(pts[i:i + 1], error_bound=True, threads=1, **options)
+            single[i], single_bounds[i] = v[0], b[0]
+        assert np.array_equal(batch, single), options
+        assert np.array_equal(bounds, single_bounds), options
+        assert np.any(batch < 0.5) and np.any(batch == 1.0)
+
+
+def test_lookups_of_more_points_than_one_batch(cards_map):
+    # More than 2^18 points per thread: looked up in several batches.
+    m = dsm.open(cards_map)
+    rng = np.random.default_rng(18)
+    n = 600000
+    pts = np.column_stack([rng.uniform(-2, 66, n), rng.uniform(-2, 66, n), rng.uniform(0, 6, n)])
+    whole, bounds = m.lookup(pts, space="raster", filter_width=2.0, error_bound=True, threads=1)
+    step = 7919
+    parts = [m.lookup(pts[i:i + step], space="raster", filter_width=2.0, error_bound=True, threads=1)
+             for i in range(0, n, step)]
+    assert np.array_equal(whole, np.concatenate([v for v, _ in parts]))
+    assert np.array_equal(bounds, np.concatenate([b for _, b in parts]))
+    pts[590000] = (1.0, 2.0, np.inf)
+    with pytest.raises(dsm.Error, match="lookup: point 1,2 at depth inf is not finite"):
+        m.lookup(pts, space="raster", threads=1)
+
+
+def test_lookup_failure_in_a_batch_raises_dsm_error(cards_map):
+    m = dsm.open(cards_map)
+    rng = np.random.default_rng(3)
+    pts = np.column_stack([rng.uniform(0, 64, 20000), rng.uniform(0, 64, 20000), rng.uniform(0, 6, 20000)])
+    pts[15000] = (np.nan, 1.0, 1.0)
+    for threads in (1, 2):
+        with pytest.raises(dsm.Error, match="lookup: point nan,1 at depth 1 is not finite"):
+            m.lookup(pts, space="raster", threads=threads)
+    with pytest.raises(dsm.Error, match="filter width -1 is not a finite value >= 0"):
+        m.lookup(pts[:10], space="raster", filter_width=-1.0)
+    # The map stays usable after a failed batch.
+    assert m.lookup(pts[:10], space="raster").shape == (10,)
+
+
 def test_errors_raise_dsm_error(tmp_path, cards_map):
     with pytest.raises(dsm.Error, match="missing.dsm"):
         dsm.open(tmp_path / "missing.dsm")

@@ -2,8 +2,10 @@
 // line per query line, as a batch job or as a coprocess a renderer holds a
 // pipe to. Documentation, including the streaming protocol: docs/dsm-lookup.md.
 //
-// Two query modes: a filtered point lookup (dsm::LookupContext), and with
-// --area-light a soft shadow of an area light (dsm::SoftShadowContext).
+// Two query modes: a filtered point lookup (batched through a
+// dsm::ShadowSystem), and with --area-light a soft shadow of an area light
+// (dsm::SoftShadowContext). Queries already waiting are answered together, up
+// to kBatchQueries; before a read that may wait, everything read is answered.
 //
 // Uses only libdsm's public API; the line parsing and printing are the tool's.
 #include <array>
@@ -34,7 +36,9 @@
 #include "area_light_size.h"
 #include "map_json.h"
 #include "dsm/reader.h"
+#include "dsm/shadow_system.h"
 #include "dsm/soft_shadow.h"
+#include "dsm/span.h"
 #include "dsm/tile_cache.h"
 #include "query_line.h"
 #include "option_checks.h"
@@ -58,6 +62,9 @@ constexpr double kMaxLength = 1e30;
 /// Light samples per soft query: a bound keeps one query's time finite
 /// (256 samples already put the estimate's noise below 1/32).
 constexpr int kMaxLightSamples = 65536;
+/// Most queries answered together: enough to amortise a batched lookup, few
+/// enough that answers to a long input start flowing at once.
+constexpr std::size_t kBatchQueries = 4096;
 
 enum class Space { World, Light, Raster };
 enum class Format { Csv, Json };
@@ -129,21 +136,50 @@ struct Answer {
     double filterWidth = 0.0;
 };
 
+using Point = std::array<double, 3>;
+
+/// What became of one query's point: its answer, or what answering it threw.
+struct Outcome {
+    Answer answer;
+    std::exception_ptr failure;
+};
+
 class QueryMode {
 public:
     virtual ~QueryMode() = default;
     /// Throws dsm::Error: ErrorCode::argument when the point is at fault,
     /// another code when the map is.
-    virtual Answer answer(const std::array<double, 3>& point) = 0;
+    virtual Answer answer(const Point& point) = 0;
+
+    /// Answers points[i] into outcomes[i] in order (both spans have the same
+    /// size), possibly stopping after the first that fails; returns how many
+    /// outcomes it filled, at least one. A failure holds what answer() throws
+    /// for that point. This one answers point by point and stops at a failure,
+    /// so that no query past one that may end the run is worked on.
+    virtual std::size_t answerAll(dsm::Span<const Point> points, dsm::Span<Outcome> outcomes) {
+        for (std::size_t i = 0; i < points.size(); ++i) {
+            try {
+                outcomes[i] = Outcome{answer(points[i]), nullptr};
+            } catch (...) {
+                outcomes[i] = Outcome{Answer{}, std::current_exception()};
+                return i + 1;
+            }
+        }
+        return points.size();
+    }
 };
 
-/// A filtered lookup at the point (dsm::LookupContext).
+/// A filtered lookup at the point: many at once through a dsm::ShadowSystem;
+/// one at a time (answer()) through a dsm::LookupContext of the same map,
+/// whose exceptions say why a point failed.
 class PointLookup final : public QueryMode {
 public:
-    PointLookup(std::shared_ptr<const dsm::DeepShadowMap> map, Space space, const dsm::LookupOptions& options)
-        : context_(std::move(map)), space_(space), options_(options) {}
+    PointLookup(std::shared_ptr<dsm::ShadowSystem> system, const dsm::MapHandle* map, Space space,
+                const dsm::LookupOptions& options)
+        : system_(std::move(system)), map_(map), thread_(system_->createThread()), context_(system_->map(map)),
+          space_(space), options_(options) {}
 
-    Answer answer(const std::array<double, 3>& p) override {
+    Answer answer(const Point& p) override {
         dsm::LookupResult r;
         switch (space_) {
             case Space::World: r = context_.world(p, options_); break;
@@ -153,10 +189,42 @@ public:
         return Answer{r.v, r.errorBound};
     }
 
+    std::size_t answerAll(dsm::Span<const Point> points, dsm::Span<Outcome> outcomes) override {
+        results_.resize(points.size());
+        const std::size_t failures = system_->lookup(*thread_, map_, lookupSpace(), points, options_, results_);
+        for (std::size_t i = 0; i < points.size(); ++i) {
+            const dsm::LookupResult& r = results_[i];
+            // A failed point holds the failure value, which an answer may hold
+            // too: such points are looked up once more, one at a time, to tell
+            // them apart and to learn why they fail.
+            if (failures > 0 && isFailureValue(r)) QueryMode::answerAll(points.subspan(i, 1), outcomes.subspan(i, 1));
+            else outcomes[i] = Outcome{Answer{r.v, r.errorBound}, nullptr};
+        }
+        return points.size();
+    }
+
 private:
+    dsm::LookupSpace lookupSpace() const {
+        switch (space_) {
+            case Space::World: return dsm::LookupSpace::world;
+            case Space::Light: return dsm::LookupSpace::light;
+            case Space::Raster: break;
+        }
+        return dsm::LookupSpace::raster;
+    }
+
+    /// The value of a failed lookup (shadow_system.h): lit with no confidence.
+    static bool isFailureValue(const dsm::LookupResult& r) {
+        return r.v == Point{1.0, 1.0, 1.0} && r.errorBound == 1.0 && r.pixelsUsed == 0;
+    }
+
+    std::shared_ptr<dsm::ShadowSystem> system_;
+    const dsm::MapHandle* map_;
+    std::unique_ptr<dsm::ShadowThread> thread_;
     dsm::LookupContext context_;
     Space space_;
     dsm::LookupOptions options_;
+    std::vector<dsm::LookupResult> results_;
 };
 
 enum class SoftMethod { Mtsm, Pcf };
@@ -169,7 +237,7 @@ public:
                     const dsm::SoftShadowOptions& options)
         : light_(tracer->light()), context_(std::move(tracer)), space_(space), method_(method), options_(options) {}
 
-    Answer answer(const std::array<double, 3>& p) override {
+    Answer answer(const Point& p) override {
         // The library takes world points; light space is one affine map away.
         const dsm::Vec3 receiver = space_ == Space::Light ? light_.lightToWorld(p) : p;
         const dsm::SoftShadowResult r = method_ == SoftMethod::Mtsm ? context_.visibility(receiver, options_)
@@ -313,43 +381,30 @@ public:
     Session(const Options& o, std::string mapPath, QueryMode& mode, AnswerWriter& writer)
         : options_(o), mapPath_(std::move(mapPath)), mode_(mode), writer_(writer) {}
 
-    /// Answers one point; on a query problem returns it, on a map problem
-    /// throws.
-    std::optional<std::string> answer(const char* key, std::uint64_t index, const std::array<double, 3>& p) {
-        try {
-            writer_.answer(key, index, mode_.answer(p));
-            return std::nullopt;
-        } catch (const dsm::Error& e) {
-            // A point or option out of range is the query's problem; anything
-            // else (a damaged or unreadable map) stops the run.
-            if (e.code() != dsm::ErrorCode::argument) throw;
-            return std::string(e.what());
-        }
-    }
-
-    Stop points(const std::vector<std::array<double, 3>>& points) {
-        for (std::size_t k = 0; k < points.size(); ++k) {
-            ++totals.queries;
-            if (const auto problem = answer("point", k + 1, points[k])) {
-                // Arguments were checked; only a point the lookup itself refuses gets here.
-                ++totals.bad;
-                writer_.bad("point", k + 1, *problem);
-                if (!writer_.flush()) return Stop::OutputError;
-                complain(oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(k + 1) + ": " +
-                                 *problem));
-                if (options_.strict) return Stop::Strict;
-            }
-        }
+    Stop points(const std::vector<Point>& points) {
+        for (std::size_t k = 0; k < points.size(); ++k) pending_.push_back(Query{k + 1, points[k], std::nullopt});
+        const Stop stop = answerPending("point", [](std::uint64_t index, const std::string& problem) {
+            // Arguments were checked; only a point the lookup itself refuses gets here.
+            return oneLine(std::string(kToolName) + ": ERROR: --point " + std::to_string(index) + ": " + problem);
+        });
+        if (stop != Stop::None) return stop;
         return writer_.flush() ? Stop::None : Stop::OutputError;
     }
 
     Stop lines(std::streambuf& in, const std::string& inputName) {
+        const auto complaint = [&inputName](std::uint64_t line, const std::string& problem) {
+            return lineError(inputName, line, problem);
+        };
         LineReader reader(in);
         std::string text;
         bool tooLong = false;
         std::uint64_t lineNumber = 0;
         for (;;) {
-            if (!reader.inputWaiting() && !writer_.flush()) return Stop::OutputError;
+            // Before a read that may wait, what was read is answered and handed over.
+            if (!reader.inputWaiting()) {
+                if (const Stop stop = answerPending("line", complaint); stop != Stop::None) return stop;
+                if (!writer_.flush()) return Stop::OutputError;
+            }
             if (!reader.next(text, tooLong)) break;
             ++lineNumber;
             ParsedLine parsed;
@@ -360,25 +415,80 @@ public:
                 parsed = parseQueryLine(text);
             }
             if (parsed.kind == ParsedLine::Kind::Skip) continue;
-            ++totals.queries;
-            std::optional<std::string> problem;
-            if (parsed.kind == ParsedLine::Kind::Bad) problem = parsed.problem;
-            else problem = answer("line", lineNumber, parsed.point);
-            if (!problem) continue;
-            ++totals.bad;
-            writer_.bad("line", lineNumber, *problem);
-            // The answer line goes out before the complaint, so a reader of
-            // both streams sees them in order.
-            if (!writer_.flush()) return Stop::OutputError;
-            complain(lineError(inputName, lineNumber, *problem));
-            if (options_.strict) return Stop::Strict;
+            Query& query = pending_.emplace_back();
+            query.index = lineNumber;
+            if (parsed.kind == ParsedLine::Kind::Bad) query.problem = std::move(parsed.problem);
+            else query.point = parsed.point;
+            // Under --strict a bad line ends the run: nothing after it is read.
+            if (pending_.size() >= kBatchQueries || (query.problem && options_.strict))
+                if (const Stop stop = answerPending("line", complaint); stop != Stop::None) return stop;
         }
+        if (const Stop stop = answerPending("line", complaint); stop != Stop::None) return stop;
         return writer_.flush() ? Stop::None : Stop::OutputError;
     }
 
     Totals totals;
 
 private:
+    /// A query read but not answered yet: its line (or --point) number, and
+    /// its point or what is wrong with its line.
+    struct Query {
+        std::uint64_t index = 0;
+        Point point{};
+        std::optional<std::string> problem;
+    };
+
+    /// Answers the pending queries in order, their points all at once: an
+    /// answer line each, or for a bad query its placeholder, then its
+    /// complaint (complaint(index, problem)). Throws on a map problem, after
+    /// the answers before it.
+    template <class Complaint>
+    Stop answerPending(const char* key, const Complaint& complaint) {
+        const std::vector<Query> queries = std::move(pending_);
+        pending_.clear();
+        points_.clear();
+        for (const Query& query : queries)
+            if (!query.problem) points_.push_back(query.point);
+        outcomes_.resize(points_.size());
+        const dsm::Span<const Point> points(points_);
+        const dsm::Span<Outcome> outcomes(outcomes_);
+        std::size_t done = 0;  // points with an outcome
+        std::size_t next = 0;  // the point of the next query that has one
+        for (const Query& query : queries) {
+            ++totals.queries;
+            std::optional<std::string> problem = query.problem;
+            if (!problem) {
+                if (next == done) done += mode_.answerAll(points.subspan(done), outcomes.subspan(done));
+                const Outcome& outcome = outcomes[next++];
+                if (!outcome.failure) {
+                    writer_.answer(key, query.index, outcome.answer);
+                    continue;
+                }
+                problem = queryProblem(outcome.failure);
+            }
+            ++totals.bad;
+            writer_.bad(key, query.index, *problem);
+            // The answer line goes out before the complaint, so a reader of
+            // both streams sees them in order.
+            if (!writer_.flush()) return Stop::OutputError;
+            complain(complaint(query.index, *problem));
+            if (options_.strict) return Stop::Strict;
+        }
+        return Stop::None;
+    }
+
+    /// Why a point has no answer: a point or option out of range is the
+    /// query's problem; anything else (a damaged or unreadable map) is
+    /// rethrown and stops the run.
+    static std::string queryProblem(const std::exception_ptr& failure) {
+        try {
+            std::rethrow_exception(failure);
+        } catch (const dsm::Error& e) {
+            if (e.code() != dsm::ErrorCode::argument) throw;
+            return e.what();
+        }
+    }
+
     /// A bad query's error line, on standard error with --errors stderr only
     /// (inline put it in the answer already; quiet drops it).
     void complain(const std::string& line) const {
@@ -389,6 +499,9 @@ private:
     std::string mapPath_;
     QueryMode& mode_;
     AnswerWriter& writer_;
+    std::vector<Query> pending_;
+    std::vector<Point> points_;     // of the pending queries that have one
+    std::vector<Outcome> outcomes_;  // of points_
 };
 
 Space spaceFromName(const std::string& name) {
@@ -460,16 +573,21 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
     std::ifstream inputFile;
     std::string inputName = "<stdin>";
     std::unique_ptr<InputFile> mapFile;
-    std::shared_ptr<dsm::DeepShadowMap> map;
+    std::shared_ptr<dsm::ShadowSystem> system;
+    const dsm::MapHandle* handle = nullptr;
+    std::shared_ptr<const dsm::DeepShadowMap> map;
     // Errors about the map name it as the user did: "<stdin>" for standard input.
     const std::string mapName = o.map == "-" ? "<stdin>" : o.map;
     DisplayNames displayNames;
     try {
         mapFile = std::make_unique<InputFile>(o.map);
         addDisplayName(displayNames, *mapFile);
-        dsm::ReaderOptions readerOptions;
-        readerOptions.cache = dsm::TileCache::create(static_cast<std::size_t>(o.cacheMiB * 1024.0 * 1024.0));
-        map = dsm::DeepShadowMap::open(mapFile->path(), readerOptions);
+        dsm::ShadowSystemOptions systemOptions;
+        systemOptions.cacheBytes = static_cast<std::size_t>(o.cacheMiB * 1024.0 * 1024.0);
+        systemOptions.maxOpenFiles = 1;
+        system = dsm::ShadowSystem::create(systemOptions);
+        handle = system->open(mapFile->path());
+        map = system->map(handle);
     } catch (const std::exception& e) {
         reportException(kToolName, e, mapName, displayNames);
         return kExitFailure;
@@ -505,7 +623,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
         lookup.filterWidth = o.filterWidth;
         lookup.level = level;
         lookup.bias = o.bias;
-        mode = std::make_unique<PointLookup>(map, spaceFromName(o.space), lookup);
+        mode = std::make_unique<PointLookup>(system, handle, spaceFromName(o.space), lookup);
     } else {
         const dsm::AreaLightSize size = parseAreaLight(o.areaLight);
         try {
