@@ -375,7 +375,23 @@ bool LookupState::tryAt(const MapImpl& map, LookupSpace space, const std::array<
 
 std::size_t LookupState::tryBatch(const MapImpl& map, LookupSpace space, Span<const std::array<double, 3>> points,
                                   const LookupOptions& options, Span<LookupResult> results) noexcept {
+    // A huge batch is taken in parts: sorting costs n log n and the points'
+    // and results' own memory stops fitting in the processor's caches, while a
+    // part already holds many points per tile.
+    constexpr std::size_t kPart = std::size_t(1) << 16;
     const std::size_t n = std::min(points.size(), results.size());
+    if (n <= kPart) return tryBatchPart(map, space, points.first(n), options, results.first(n));
+    std::size_t failures = 0;
+    for (std::size_t begin = 0; begin < n; begin += kPart) {
+        const std::size_t count = std::min(kPart, n - begin);
+        failures += tryBatchPart(map, space, points.subspan(begin, count), options, results.subspan(begin, count));
+    }
+    return failures;
+}
+
+std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Span<const std::array<double, 3>> points,
+                                      const LookupOptions& options, Span<LookupResult> results) noexcept {
+    const std::size_t n = points.size();
     std::size_t failures = 0;
     // Sorting needs scratch space; without it the points are looked up in
     // the order given (same answers, less locality).

@@ -70,6 +70,8 @@ private:
         std::size_t index;
     };
 
+    std::size_t tryBatchPart(const MapImpl& map, LookupSpace space, Span<const std::array<double, 3>> points,
+                             const LookupOptions& options, Span<LookupResult> results) noexcept;
     const format::DecodedTile& tile(const MapImpl& map, unsigned level, std::uint32_t tx, std::uint32_t ty);
     double filterLevel(const MapImpl& map, unsigned level, double rx, double ry, double z, double width,
                        PixelFilter filter, double out[3], int& pixelsUsed);
