@@ -343,12 +343,14 @@ int main(int argc, char** argv) {
             }
             const Rate single = singleRate(*big, bh, pts, bilinear, std::max(1, cfg.repeat / 2), checksum);
             const Rate batched = batchRate(*big, bh, pts, bilinear, std::max(1, cfg.repeat / 2), 65536, checksum);
+            const Rate batchedAll = batchRate(*big, bh, pts, bilinear, std::max(1, cfg.repeat / 2), pts.size(), checksum);
             const TileCacheStats s = big->cache().stats();
             std::printf("4. Fully cached %u² map (%u spp, %.1f MiB decoded in %llu tiles), %zu uniform random points:\n",
                         info.width, cfg.bigSpp, double(s.bytesInUse) / (1 << 20),
                         static_cast<unsigned long long>(s.tilesInUse), pts.size());
             printRate("one point per call", single, 0, "");
             printRate("batches of 65536", batched, single.nsEach, "one per call");
+            printRate("one batch of all the points", batchedAll, single.nsEach, "one per call");
         }
 
         // ---------------------------------------------------------------- 5

@@ -66,8 +66,9 @@ private:
         std::shared_ptr<const format::DecodedTile> keepAlive;
     };
     struct BatchItem {
-        std::uint64_t key;
-        std::size_t index;
+        std::uint64_t key;                // level-0 tile under the point
+        std::size_t index;                // in the caller's arrays
+        std::array<double, 3> raster;     // the point in raster space
     };
 
     std::size_t tryBatchPart(const MapImpl& map, LookupSpace space, Span<const std::array<double, 3>> points,
@@ -82,7 +83,6 @@ private:
     std::size_t slotMask_ = 0;
     AxisWeights wx_, wy_;
     std::vector<BatchItem> batchOrder_;
-    std::vector<std::array<double, 3>> batchRaster_;
 };
 
 DSM_NAMESPACE_END
