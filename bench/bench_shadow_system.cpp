@@ -268,40 +268,46 @@ int main(int argc, char** argv) {
         auto system = ShadowSystem::create(wide);
         MapHandle* h = system->open(path);
         const auto map = system->map(h);
-        const std::vector<Point> random = randomPoints(*map, cfg.points, 1);
         LookupOptions bilinear;
         bilinear.level = 0;
-
         const DirectMap direct(*map);
-        const double tDirect = median(cfg.repeat, [&] {
-            for (const Point& p : random) checksum += direct.bilinear(p);
-        });
-        const Rate rDirect = rateOf(tDirect, random.size());
-        const Rate rSingle = singleRate(*system, h, random, bilinear, cfg.repeat, checksum);
         ShadowSystemOptions bigTable = wide;
         bigTable.threadTiles = 1024;
         auto system1024 = ShadowSystem::create(bigTable);
         MapHandle* h1024 = system1024->open(path);
-        const Rate rSingle1024 = singleRate(*system1024, h1024, random, bilinear, cfg.repeat, checksum);
-        const Rate rBatch = batchRate(*system, h, random, bilinear, cfg.repeat, 4096, checksum);
         LookupContext context(map);
-        const Rate rContext = rateOf(median(cfg.repeat,
-                                            [&] {
-                                                for (const Point& p : random)
-                                                    checksum += context.raster(p[0], p[1], p[2], bilinear).v[0];
-                                            }),
-                                     random.size());
-        const TileCacheStats warm = system->cache().stats();
-        std::printf("\nShadow system, %s %u² at %u spp, %u² tiles, %zu random points over non-empty pixels\n",
-                    fs::path(cfg.scene).stem().c_str(), cfg.size, cfg.spp, map->info().tileSize, random.size());
-        std::printf("(decoded map %.1f MiB in %llu tiles, all cached)\n", double(warm.bytesInUse) / (1 << 20),
-                    static_cast<unsigned long long>(warm.tilesInUse));
-        std::printf("1. Warm random bilinear lookups (box width 1, level 0), one thread:\n");
-        printRate("direct: four in-memory VisibilityFunction::evaluate", rDirect, 0, "");
-        printRate("ShadowSystem::lookup, one point (threadTiles 64, default)", rSingle, rDirect.nsEach, "direct");
-        printRate("ShadowSystem::lookup, one point (threadTiles 1024)", rSingle1024, rDirect.nsEach, "direct");
-        printRate("ShadowSystem::lookup, batches of 4096 (threadTiles 64)", rBatch, rDirect.nsEach, "direct");
-        printRate("LookupContext::raster", rContext, rDirect.nsEach, "direct");
+        // Two sets of random points: 4096 (their pixels stay in the processor's
+        // caches once warm, as bench_lookup's) and cfg.points (they spread over
+        // the whole decoded map, which does not).
+        Rate rSingle;
+        std::vector<Point> random;
+        for (const std::size_t count : {std::size_t(4096), cfg.points}) {
+            random = randomPoints(*map, count, 1);
+            const double tDirect = median(cfg.repeat, [&] {
+                for (const Point& p : random) checksum += direct.bilinear(p);
+            });
+            const Rate rDirect = rateOf(tDirect, random.size());
+            rSingle = singleRate(*system, h, random, bilinear, cfg.repeat, checksum);
+            const Rate rSingle1024 = singleRate(*system1024, h1024, random, bilinear, cfg.repeat, checksum);
+            const Rate rBatch = batchRate(*system, h, random, bilinear, cfg.repeat, 4096, checksum);
+            const Rate rContext = rateOf(median(cfg.repeat,
+                                                [&] {
+                                                    for (const Point& p : random)
+                                                        checksum += context.raster(p[0], p[1], p[2], bilinear).v[0];
+                                                }),
+                                         random.size());
+            const TileCacheStats warm = system->cache().stats();
+            std::printf("\nShadow system, %s %u² at %u spp, %u² tiles, %zu random points over non-empty pixels\n",
+                        fs::path(cfg.scene).stem().c_str(), cfg.size, cfg.spp, map->info().tileSize, random.size());
+            std::printf("(decoded map %.1f MiB in %llu tiles, all cached)\n", double(warm.bytesInUse) / (1 << 20),
+                        static_cast<unsigned long long>(warm.tilesInUse));
+            std::printf("1. Warm random bilinear lookups (box width 1, level 0), one thread:\n");
+            printRate("direct: four in-memory VisibilityFunction::evaluate", rDirect, 0, "");
+            printRate("ShadowSystem::lookup, one point (threadTiles 64, default)", rSingle, rDirect.nsEach, "direct");
+            printRate("ShadowSystem::lookup, one point (threadTiles 1024)", rSingle1024, rDirect.nsEach, "direct");
+            printRate("ShadowSystem::lookup, batches of 4096 (threadTiles 64)", rBatch, rDirect.nsEach, "direct");
+            printRate("LookupContext::raster", rContext, rDirect.nsEach, "direct");
+        }
 
         const std::vector<Point> scan = scanlinePoints(*map);
         const Rate rScan = singleRate(*system, h, scan, bilinear, cfg.repeat, checksum);
