@@ -450,7 +450,14 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
         }
         if (inside && rx >= 0.0 && ry >= 0.0 && rx < static_cast<double>(info.width) &&
             ry < static_cast<double>(info.height))
-            key = (static_cast<std::uint64_t>(ry) / T) * tilesX + static_cast<std::uint64_t>(rx) / T;
+        {
+            // The tile, then the pixel within it: a tile's points are taken
+            // in the order its records and arrays lie in memory. A tile
+            // index below 2^40 and a pixel index below 2^24 (tiles of at
+            // most 4096 x 4096, the reader's limit) fit one key.
+            const std::uint64_t px = static_cast<std::uint64_t>(rx), py = static_cast<std::uint64_t>(ry);
+            key = ((py / T) * tilesX + px / T) << 24 | ((py % T) * T + px % T);
+        }
         batchOrder_[i] = BatchItem{key, i, {rx, ry, z}};
     }
     std::sort(batchOrder_.begin(), batchOrder_.begin() + static_cast<std::ptrdiff_t>(n),
