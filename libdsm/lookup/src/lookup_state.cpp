@@ -1,9 +1,11 @@
 #include "lookup_state.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <exception>
 #include <new>
+#include <utility>
 
 #include "dsm/error.h"
 #include "pixel_filter.h"
@@ -168,7 +170,7 @@ LookupState::LookupState(unsigned tileSlots) {
 std::size_t LookupState::memoryBytes() const {
     return sizeof(*this) + slots_.capacity() * sizeof(TileSlot) +
            (wx_.weights.capacity() + wy_.weights.capacity()) * sizeof(double) +
-           batchOrder_.capacity() * sizeof(BatchItem);
+           (batchOrder_.capacity() + batchScratch_.capacity()) * sizeof(BatchItem);
 }
 
 void LookupState::releaseTiles() {
@@ -422,6 +424,7 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
     if (sorted) {
         try {
             batchOrder_.resize(n);
+            batchScratch_.resize(n);
         } catch (...) {
             sorted = false;
         }
@@ -437,7 +440,8 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
     const MapInfo& info = map.info;
     const std::uint32_t T = info.tileSize;
     const std::uint64_t tilesX = info.levels[0].tilesX;
-    constexpr std::uint64_t kNoTile = ~std::uint64_t(0);
+    // After every tile's keys: the points looked up in their own space.
+    const std::uint64_t kNoTile = (tilesX * info.levels[0].tilesY) << 24;
     for (std::size_t i = 0; i < n; ++i) {
         std::uint64_t key = kNoTile;
         double rx = 0.0, ry = 0.0, z = 0.0;
@@ -460,8 +464,20 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
         }
         batchOrder_[i] = BatchItem{key, i, {rx, ry, z}};
     }
-    std::sort(batchOrder_.begin(), batchOrder_.begin() + static_cast<std::ptrdiff_t>(n),
-              [](const BatchItem& a, const BatchItem& b) { return a.key < b.key; });
+    // A radix sort on the key's bits in use: a few linear passes instead of
+    // n log n comparisons, so that ordering costs less than it saves.
+    constexpr int kDigitBits = 11;
+    const int keyBits = std::bit_width(kNoTile);
+    std::uint32_t counts[1u << kDigitBits];
+    for (int shift = 0; shift < keyBits; shift += kDigitBits) {
+        std::fill(std::begin(counts), std::end(counts), 0u);
+        for (std::size_t i = 0; i < n; ++i) ++counts[(batchOrder_[i].key >> shift) & ((1u << kDigitBits) - 1)];
+        std::uint32_t start = 0;
+        for (std::uint32_t& c : counts) start += std::exchange(c, start);
+        for (std::size_t i = 0; i < n; ++i)
+            batchScratch_[counts[(batchOrder_[i].key >> shift) & ((1u << kDigitBits) - 1)]++] = batchOrder_[i];
+        batchOrder_.swap(batchScratch_);
+    }
     for (std::size_t j = 0; j < n; ++j) {
         const std::size_t i = batchOrder_[j].index;
         bool ok;

@@ -83,6 +83,7 @@ private:
     std::size_t slotMask_ = 0;
     AxisWeights wx_, wy_;
     std::vector<BatchItem> batchOrder_;
+    std::vector<BatchItem> batchScratch_;  // the other half of each radix pass
 };
 
 DSM_NAMESPACE_END
