@@ -289,6 +289,10 @@ public:
         d["tiles_read"] = s.tilesRead;
         d["bytes_read"] = s.bytesRead;
         d["evictions"] = s.evictions;
+        d["duplicate_reads"] = s.duplicateReads;
+        d["waits"] = s.waits;
+        d["tiles_in_use"] = s.tilesInUse;
+        d["peak_tiles_in_use"] = s.peakTilesInUse;
         return d;
     }
 

@@ -95,6 +95,21 @@ def test_large_batch_equals_lookups_one_point_at_a_time(cards_map):
         assert np.any(batch < 0.5) and np.any(batch == 1.0)
 
 
+def test_cache_stats_count_reads_once_per_tile(cards_map):
+    # A private cache smaller than the map: tiles come and go, two threads
+    # share it, and no tile is ever read twice at once.
+    m = dsm.open(cards_map, cache_mb=0.05)
+    rng = np.random.default_rng(3)
+    n = 50000
+    pts = np.column_stack([rng.uniform(0, 64, n), rng.uniform(0, 64, n), rng.uniform(0, 6, n)])
+    m.lookup(pts, space="raster", threads=2)
+    stats = m.cache_stats()
+    assert stats["duplicate_reads"] == 0
+    assert stats["tiles_read"] > 0 and stats["evictions"] > 0
+    assert stats["peak_tiles_in_use"] >= stats["tiles_in_use"] >= 1
+    assert stats["waits"] >= 0
+
+
 def test_lookups_of_more_points_than_one_batch(cards_map):
     # More than 2^18 points per thread: looked up in several batches.
     m = dsm.open(cards_map)

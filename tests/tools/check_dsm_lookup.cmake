@@ -866,13 +866,13 @@ elseif(CHECK STREQUAL "stats")
   expect_matches(ERR "^dsm-lookup: stats: 64 queries \\(0 bad\\) in [0-9.e+-]+ s, [0-9.e+]+ queries/s\n")
   # The four level-0 tiles, each read once into a 256 MiB cache.
   string(CONCAT pattern "\ndsm-lookup: stats: cache [0-9]+ hits, 4 misses \\([0-9.]+% hits\\), 4 tiles read "
-                        "\\([0-9]+ bytes\\), 0 evictions, peak [1-9][0-9]* of 268435456 bytes in use\n$")
+                        "\\([0-9]+ bytes\\), 0 read twice, 0 waits, 0 evictions, peak [1-9][0-9]* of 268435456 bytes in use\n$")
   expect_matches(ERR "${pattern}")
   # A budget of 0 keeps one tile: every new tile evicts the last.
   query("${POINTS}" "${MONO}" -s raster -l 0 --stats --cache-mb 0)
   expect_rc(0)
   expect_equal(OUT "${VALUES}")
-  expect_matches(ERR "4 tiles read \\([0-9]+ bytes\\), 3 evictions, peak [0-9]+ of 0 bytes")
+  expect_matches(ERR "4 tiles read \\([0-9]+ bytes\\), 0 read twice, 0 waits, 3 evictions, peak [0-9]+ of 0 bytes")
   # Bad lines are counted.
   query("1 2\n1 2 3\n" "${MONO}" --stats)
   expect_rc(1)

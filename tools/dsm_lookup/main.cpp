@@ -534,8 +534,8 @@ void printStats(const Totals& totals, double seconds, const dsm::TileCacheStats&
               << '\n'
               << kToolName << ": stats: cache " << c.hits << " hits, " << c.misses << " misses ("
               << percent(c.hits, c.hits + c.misses) << " hits), " << c.tilesRead << " tiles read (" << c.bytesRead
-              << " bytes), " << c.evictions << " evictions, peak " << c.peakBytesInUse << " of " << c.budgetBytes
-              << " bytes in use\n";
+              << " bytes), " << c.duplicateReads << " read twice, " << c.waits << " waits, " << c.evictions
+              << " evictions, peak " << c.peakBytesInUse << " of " << c.budgetBytes << " bytes in use\n";
 }
 
 void printSoftStats(const dsm::SoftShadowStats& s, std::size_t hierarchyTiles) {
