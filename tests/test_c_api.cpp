@@ -99,11 +99,22 @@ protected:
         return p;
     }
 
+    // The map from memory named "damaged", with a bit of tile 0,0 of level 0
+    // (written first) flipped; null if it does not open.
+    dsm_map* openDamaged() {
+        damaged_ = bytes_;
+        damaged_[kHeaderSize + 3] ^= 0x10;
+        dsm_map* map = nullptr;
+        return dsm_map_open_memory(damaged_.data(), damaged_.size(), "damaged", nullptr, &map) == DSM_OK ? map
+                                                                                                         : nullptr;
+    }
+
     TempDir dir_;
     std::string path_ = (dir_ / "map.dsm").string();
     dsm::WriterOptions options_;
     dsm::test::Image image_;
     Bytes bytes_;
+    Bytes damaged_;  // what openDamaged() reads from
 };
 
 TEST_F(CApi, ResultNamesFollowTheErrorCodes) {
@@ -711,10 +722,8 @@ TEST_F(CApi, EveryFailureReturnsACodeAndAMessage) {
 }
 
 TEST_F(CApi, ATileThatCannotBeReadFailsItsPointsOnly) {
-    Bytes damaged = bytes_;
-    damaged[kHeaderSize + 3] ^= 0x10;  // tile 0,0 of level 0 was written first
-    dsm_map* map = nullptr;
-    ASSERT_EQ(dsm_map_open_memory(damaged.data(), damaged.size(), "damaged", nullptr, &map), DSM_OK);
+    dsm_map* map = openDamaged();
+    ASSERT_NE(map, nullptr) << dsm_last_error_message();
     dsm_lookup_context* context = nullptr;
     ASSERT_EQ(dsm_lookup_context_create(map, &context), DSM_OK);
     dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;
@@ -743,10 +752,8 @@ TEST_F(CApi, TheLastErrorNamesTheFileItConcerns) {
     EXPECT_STREQ(dsm_last_error_file(), "");
 
     // A tile that cannot be read, through lookups and pixels: the name the buffer was given.
-    Bytes damaged = bytes_;
-    damaged[kHeaderSize + 3] ^= 0x10;  // tile 0,0 of level 0 was written first
-    dsm_map* map = nullptr;
-    ASSERT_EQ(dsm_map_open_memory(damaged.data(), damaged.size(), "damaged", nullptr, &map), DSM_OK);
+    dsm_map* map = openDamaged();
+    ASSERT_NE(map, nullptr) << dsm_last_error_message();
     dsm_lookup_context* context = nullptr;
     ASSERT_EQ(dsm_lookup_context_create(map, &context), DSM_OK);
     dsm_lookup_options o = DSM_LOOKUP_OPTIONS_INIT;

@@ -10,33 +10,13 @@
 #include <unistd.h>
 
 #include "dsm/error.h"
+#include "regular_file.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
 
 using detail::concat;
 
-namespace {
-
-// Opens a regular file for reading; throws ErrorCode::io naming it.
-int openRegular(const std::string& path, struct stat& st) {
-    // O_NONBLOCK: opening a FIFO would otherwise wait for a writer forever.
-    const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-    if (fd < 0) throw Error(ErrorCode::io, concat("'", path, "': cannot open: ", std::strerror(errno)));
-    if (::fstat(fd, &st) != 0) {
-        const int reason = errno;
-        ::close(fd);
-        throw Error(ErrorCode::io, concat("'", path, "': cannot stat: ", std::strerror(reason)));
-    }
-    if (!S_ISREG(st.st_mode)) {
-        ::close(fd);
-        throw Error(ErrorCode::io, concat("'", path, "': not a regular file"));
-    }
-    ::fcntl(fd, F_SETFL, ::fcntl(fd, F_GETFL) & ~O_NONBLOCK);
-    return fd;
-}
-
-}  // namespace
 
 struct FilePool::File {
     std::string path;
@@ -67,11 +47,7 @@ public:
             FilePool::File& file;
             ~Release() { pool.release(file); }
         } release{*pool_, *file_};
-        for (;;) {
-            const ssize_t n = ::pread(fd, out, count, static_cast<off_t>(offset));
-            if (n >= 0) return static_cast<std::size_t>(n);
-            if (errno != EINTR) throw std::runtime_error(std::strerror(errno));
-        }
+        return readAt(fd, offset, out, count);
     }
 
     FilePool& pool() const { return *pool_; }
@@ -92,16 +68,12 @@ std::shared_ptr<const MapInput> FilePool::open(const std::string& path) {
     std::lock_guard lock(mutex_);
     closeIdleBeyond(maxOpen_ - 1);
     struct stat st {};
-    file->fd = openRegular(path, st);
+    file->fd = openRegularFile(path, st);
     file->device = st.st_dev;
     file->inode = st.st_ino;
     file->size = static_cast<std::uint64_t>(st.st_size);
     file->modified = st.st_mtim;
-    open_.push_front(file.get());
-    file->position = open_.begin();
-    ++stats_.opens;
-    ++stats_.filesOpen;
-    stats_.peakFilesOpen = std::max(stats_.peakFilesOpen, stats_.filesOpen);
+    listOpened(*file);
     return std::make_shared<PooledInput>(shared_from_this(), std::move(file));
 }
 
@@ -114,6 +86,14 @@ void FilePool::forget(File& file) {
     file.fd = -1;
     open_.erase(file.position);
     --stats_.filesOpen;
+}
+
+void FilePool::listOpened(File& file) {
+    open_.push_front(&file);
+    file.position = open_.begin();
+    ++stats_.opens;
+    ++stats_.filesOpen;
+    stats_.peakFilesOpen = std::max(stats_.peakFilesOpen, stats_.filesOpen);
 }
 
 void FilePool::closeIdleBeyond(unsigned limit) {
@@ -134,7 +114,7 @@ int FilePool::acquire(File& file) {
     if (file.fd < 0) {
         closeIdleBeyond(maxOpen_ - 1);
         struct stat st {};
-        const int fd = openRegular(file.path, st);
+        const int fd = openRegularFile(file.path, st);
         if (st.st_dev != file.device || st.st_ino != file.inode ||
             static_cast<std::uint64_t>(st.st_size) != file.size || st.st_mtim.tv_sec != file.modified.tv_sec ||
             st.st_mtim.tv_nsec != file.modified.tv_nsec) {
@@ -142,15 +122,12 @@ int FilePool::acquire(File& file) {
             throw std::runtime_error("the file was replaced or changed since it was opened");
         }
         file.fd = fd;
-        open_.push_front(&file);
-        ++stats_.opens;
+        listOpened(file);
         ++stats_.reopens;
-        ++stats_.filesOpen;
-        stats_.peakFilesOpen = std::max(stats_.peakFilesOpen, stats_.filesOpen);
     } else if (file.position != open_.begin()) {
         open_.splice(open_.begin(), open_, file.position);
+        file.position = open_.begin();
     }
-    file.position = open_.begin();
     ++file.readers;
     return file.fd;
 }

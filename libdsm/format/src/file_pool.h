@@ -47,6 +47,7 @@ public:
 private:
     explicit FilePool(unsigned maxOpen) : maxOpen_(maxOpen < 1 ? 1 : maxOpen) {}
     void closeIdleBeyond(unsigned limit);  // with mutex_ held
+    void listOpened(File& file);           // a file just opened: first in open_, counted; with mutex_ held
 
     const unsigned maxOpen_;
     mutable std::mutex mutex_;

@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include "dsm/error.h"
+#include "regular_file.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -19,22 +20,8 @@ namespace {
 class FileInput final : public MapInput {
 public:
     explicit FileInput(const std::string& path) {
-        using detail::concat;
-        // O_NONBLOCK: opening a FIFO would otherwise wait for a writer forever.
-        // It is refused below, and means nothing for the regular file we keep.
-        fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC | O_NONBLOCK);
-        if (fd_ < 0) throw Error(ErrorCode::io, concat("'", path, "': cannot open: ", std::strerror(errno)), path);
         struct stat st {};
-        if (::fstat(fd_, &st) != 0) {
-            const int reason = errno;
-            ::close(fd_);
-            throw Error(ErrorCode::io, concat("'", path, "': cannot stat: ", std::strerror(reason)), path);
-        }
-        if (!S_ISREG(st.st_mode)) {
-            ::close(fd_);
-            throw Error(ErrorCode::io, concat("'", path, "': not a regular file"), path);
-        }
-        ::fcntl(fd_, F_SETFL, ::fcntl(fd_, F_GETFL) & ~O_NONBLOCK);
+        fd_ = openRegularFile(path, st);
         size_ = static_cast<std::uint64_t>(st.st_size);
     }
     ~FileInput() override { ::close(fd_); }
@@ -44,11 +31,7 @@ public:
     std::uint64_t size() const override { return size_; }
 
     std::size_t read(std::uint64_t offset, void* out, std::size_t count) const override {
-        for (;;) {
-            const ssize_t n = ::pread(fd_, out, count, static_cast<off_t>(offset));
-            if (n >= 0) return static_cast<std::size_t>(n);
-            if (errno != EINTR) throw std::runtime_error(std::strerror(errno));
-        }
+        return readAt(fd_, offset, out, count);
     }
 
 private:

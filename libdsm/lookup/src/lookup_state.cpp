@@ -122,23 +122,6 @@ bool isBilinear(PixelFilter filter, double width) {
     throw Error(ErrorCode::argument, concat("lookup: bias ", options.bias, " is not finite"));
 }
 
-// Keeps why a lookup failed; a message that cannot be stored is left empty.
-void recordFailure(LookupFailure& failure, ErrorCode code, const char* message) noexcept {
-    failure.code = code;
-    try {
-        failure.message = message;
-    } catch (...) {
-        failure.message.clear();
-    }
-}
-
-LookupResult failureValue(int channels) {
-    LookupResult r;
-    r.channels = channels;
-    r.errorBound = 1.0;
-    return r;
-}
-
 // Raster position and depth of a point; false when it is lit without a
 // lookup (behind a perspective light). Throws for a non-finite point.
 bool toRaster(const MapInfo& info, LookupSpace space, const std::array<double, 3>& p, double& rx, double& ry,
@@ -160,11 +143,31 @@ bool toRaster(const MapInfo& info, LookupSpace space, const std::array<double, 3
 
 }  // namespace
 
+void recordFailure(LookupFailure& failure, ErrorCode code, const char* message) noexcept {
+    failure.code = code;
+    try {
+        failure.message = message;
+    } catch (...) {
+        failure.message.clear();
+    }
+}
+
+LookupResult failureValue(int channels) noexcept {
+    LookupResult r;
+    r.channels = channels;
+    r.errorBound = 1.0;
+    return r;
+}
+
 LookupState::LookupState(unsigned tileSlots) {
     std::size_t n = 2;  // pairs of slots
     while (n < tileSlots) n <<= 1;
     slots_.resize(n);
     slotMask_ = n - 1;
+    // Room for the footprints of the common filters (bilinear, and widths up
+    // to 6 pixels at the level used), so that they never allocate.
+    wx_.weights.reserve(8);
+    wy_.weights.reserve(8);
 }
 
 std::size_t LookupState::memoryBytes() const {
@@ -218,19 +221,15 @@ double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx,
     const double wxs[2] = {pixelWeight(filter, x0, cx, r), pixelWeight(filter, x0 + 1, cx, r)};
     const double wys[2] = {pixelWeight(filter, y0, cy, r), pixelWeight(filter, y0 + 1, cy, r)};
     const std::uint32_t T = map.info.tileSize;
-    const bool mono = map.info.channels == 1;
-    // Usually all four pixels lie in one tile: fetch it once.
-    const format::DecodedTile* shared = nullptr;
-    if (x0 >= 0 && y0 >= 0 && x0 + 1 < static_cast<long>(L.width) && y0 + 1 < static_cast<long>(L.height) &&
+    // The common case: a monochrome map and all four pixels in one tile,
+    // fetched once and summed straight-line. A pixel of weight 0 adds +0 to
+    // the sums, which leaves them unchanged: the same result as skipping it.
+    if (map.info.channels == 1 && x0 >= 0 && y0 >= 0 && x0 + 1 < static_cast<long>(L.width) &&
+        y0 + 1 < static_cast<long>(L.height) &&
         static_cast<std::uint32_t>(x0) / T == static_cast<std::uint32_t>(x0 + 1) / T &&
-        static_cast<std::uint32_t>(y0) / T == static_cast<std::uint32_t>(y0 + 1) / T)
-        shared = &tile(map, level, static_cast<std::uint32_t>(x0) / T, static_cast<std::uint32_t>(y0) / T);
-    double total = 0.0;
-    out[0] = out[1] = out[2] = 0.0;
-    if (shared && mono) {
-        // The common case, straight-line. A pixel of weight 0 adds +0 to the
-        // sums, which leaves them unchanged: the same result as skipping it.
-        const format::DecodedTile& t = *shared;
+        static_cast<std::uint32_t>(y0) / T == static_cast<std::uint32_t>(y0 + 1) / T) {
+        const format::DecodedTile& t =
+            tile(map, level, static_cast<std::uint32_t>(x0) / T, static_cast<std::uint32_t>(y0) / T);
         const std::size_t p = std::size_t(static_cast<std::uint32_t>(y0) % T) * t.width + static_cast<std::uint32_t>(x0) % T;
         double v00[3], v01[3], v10[3], v11[3];
         evaluatePixel(t, p, z, v00);
@@ -238,42 +237,20 @@ double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx,
         evaluatePixel(t, p + t.width, z, v10);
         evaluatePixel(t, p + t.width + 1, z, v11);
         const double w00 = wxs[0] * wys[0], w01 = wxs[1] * wys[0], w10 = wxs[0] * wys[1], w11 = wxs[1] * wys[1];
+        const double total = w00 + w01 + w10 + w11;
         out[0] = w00 * v00[0] + w01 * v01[0] + w10 * v10[0] + w11 * v11[0];
-        total = w00 + w01 + w10 + w11;
         pixelsUsed += (w00 != 0.0) + (w01 != 0.0) + (w10 != 0.0) + (w11 != 0.0);
         if (total > 0.0) out[0] /= total;
         out[1] = out[2] = out[0];
         return total;
     }
-    for (int j = 0; j < 2; ++j) {
-        const long y = y0 + j;
-        if (y < 0 || y >= static_cast<long>(L.height) || wys[j] == 0.0) continue;
-        for (int i = 0; i < 2; ++i) {
-            const long x = x0 + i;
-            if (x < 0 || x >= static_cast<long>(L.width) || wxs[i] == 0.0) continue;
-            const double w = wxs[i] * wys[j];
-            const auto ux = static_cast<std::uint32_t>(x), uy = static_cast<std::uint32_t>(y);
-            const format::DecodedTile& t = shared ? *shared : tile(map, level, ux / T, uy / T);
-            double v[3];
-            evaluatePixel(t, std::size_t(uy % T) * t.width + ux % T, z, v);
-            out[0] += w * v[0];
-            if (!mono) {
-                out[1] += w * v[1];
-                out[2] += w * v[2];
-            }
-            total += w;
-            ++pixelsUsed;
-        }
-    }
-    if (total > 0.0) {
-        out[0] /= total;
-        if (!mono) {
-            out[1] /= total;
-            out[2] /= total;
-        }
-    }
-    if (mono) out[1] = out[2] = out[0];
-    return total;
+    // RGB, or near the image's or a tile's edge: the general sum over the two
+    // pixels of each axis.
+    wx_.first = x0;
+    wx_.weights.assign(wxs, wxs + 2);
+    wy_.first = y0;
+    wy_.weights.assign(wys, wys + 2);
+    return sumFootprint(map, level, z, out, pixelsUsed);
 }
 
 // Filtered visibility of one level; returns the total weight used.
@@ -285,6 +262,13 @@ double LookupState::filterLevel(const MapImpl& map, unsigned level, double rx, d
     const LevelInfo& L = map.info.levels[level];
     axisWeights(filter, rx * scale, width, L.width, wx_);
     axisWeights(filter, ry * scale, width, L.height, wy_);
+    return sumFootprint(map, level, z, out, pixelsUsed);
+}
+
+// The weighted mean of the pixels wx_ x wy_ of a level (those outside the
+// image, or of weight 0, left out); returns the total weight.
+double LookupState::sumFootprint(const MapImpl& map, unsigned level, double z, double out[3], int& pixelsUsed) {
+    const LevelInfo& L = map.info.levels[level];
     const std::uint32_t T = map.info.tileSize;
     double total = 0.0;
     out[0] = out[1] = out[2] = 0.0;
@@ -450,7 +434,6 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
             inside = toRaster(info, space, points[i], rx, ry, z);
         } catch (...) {
             inside = false;  // looked up again below, which records the failure
-            rx = ry = z = std::nan("");
         }
         if (inside && rx >= 0.0 && ry >= 0.0 && rx < static_cast<double>(info.width) &&
             ry < static_cast<double>(info.height))

@@ -25,6 +25,11 @@ struct AxisWeights {
     std::vector<double> weights;
 };
 
+/// Keeps why a lookup failed; a message that cannot be stored is left empty.
+void recordFailure(LookupFailure& failure, ErrorCode code, const char* message) noexcept;
+/// The documented value of a failed lookup (lookup.h): lit, error bound 1.
+LookupResult failureValue(int channels) noexcept;
+
 class LookupState {
 public:
     /// `tileSlots` (rounded up to a power of two, at least 2) tiles are kept
@@ -76,6 +81,7 @@ private:
     const format::DecodedTile& tile(const MapImpl& map, unsigned level, std::uint32_t tx, std::uint32_t ty);
     double filterLevel(const MapImpl& map, unsigned level, double rx, double ry, double z, double width,
                        PixelFilter filter, double out[3], int& pixelsUsed);
+    double sumFootprint(const MapImpl& map, unsigned level, double z, double out[3], int& pixelsUsed);
     double bilinearLevel(const MapImpl& map, unsigned level, double cx, double cy, double z, PixelFilter filter,
                          double width, double out[3], int& pixelsUsed);
 

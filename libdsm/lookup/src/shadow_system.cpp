@@ -103,21 +103,7 @@ const char* unusable(const void* threadSystem, const void* system, const MapHand
     return nullptr;
 }
 
-void fail(LookupFailure& failure, const char* why) noexcept {
-    failure.code = ErrorCode::argument;
-    try {
-        failure.message = why;
-    } catch (...) {
-        failure.message.clear();
-    }
-}
-
-LookupResult failureValue(const MapHandle* handle) {
-    LookupResult r;
-    r.channels = handle ? handle->reader->info.channels : 1;
-    r.errorBound = 1.0;
-    return r;
-}
+int channelsOf(const MapHandle* handle) { return handle ? handle->reader->info.channels : 1; }
 
 }  // namespace
 
@@ -126,8 +112,8 @@ bool ShadowSystem::lookup(ShadowThread& thread, const MapHandle* handle, LookupS
                           LookupResult& result) const noexcept {
     ShadowThread::Impl& t = *thread.impl_;
     if (const char* why = unusable(t.system, impl_.get(), handle)) {
-        fail(t.state.failure, why);
-        result = failureValue(handle);
+        recordFailure(t.state.failure, ErrorCode::argument, why);
+        result = failureValue(channelsOf(handle));
         return false;
     }
     return t.state.tryAt(*handle->reader, space, point, options, result);
@@ -138,9 +124,9 @@ std::size_t ShadowSystem::lookup(ShadowThread& thread, const MapHandle* handle, 
                                  Span<LookupResult> results) const noexcept {
     ShadowThread::Impl& t = *thread.impl_;
     if (const char* why = unusable(t.system, impl_.get(), handle)) {
-        fail(t.state.failure, why);
+        recordFailure(t.state.failure, ErrorCode::argument, why);
         const std::size_t n = std::min(points.size(), results.size());
-        for (std::size_t i = 0; i < n; ++i) results[i] = failureValue(handle);
+        for (std::size_t i = 0; i < n; ++i) results[i] = failureValue(channelsOf(handle));
         return n;
     }
     return t.state.tryBatch(*handle->reader, space, points, options, results);
