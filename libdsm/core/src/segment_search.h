@@ -18,7 +18,7 @@ inline double lerpSegment(double za, double va, double zb, double vb, double z) 
 /// Branch-free halving: the loop runs log2(n) times whatever q is, so the
 /// processor has no search branch to mispredict. Compares in double, as the
 /// evaluation does. The vertices are in non-decreasing depth order.
-inline std::size_t firstDepthAbove(const float* z, std::size_t n, double q) {
+[[gnu::always_inline]] inline std::size_t firstDepthAbove(const float* z, std::size_t n, double q) {
     if (n == 0) return 0;
     const float* base = z;
     while (n > 1) {
