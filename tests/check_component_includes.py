@@ -28,6 +28,7 @@ ALLOWED = {
     "exr": CORE_SIDE | {"exr"},
     "reference": CORE_SIDE | {"build", "reference"},
     "c": CORE_SIDE | {"c"},
+    "farm": CORE_SIDE | {"build", "farm"},
 }
 INCLUDE = re.compile(r'^\s*#\s*include\s*[<"]([^">]+)[">]')
 SOURCES = {".h", ".hpp", ".c", ".cpp"}
