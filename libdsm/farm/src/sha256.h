@@ -7,9 +7,11 @@
 #include <string>
 #include <string_view>
 
+#include "tested_internal.h"
+
 namespace dsm::detail {
 
-class Sha256 {
+class DSM_TESTED_INTERNAL Sha256 {
 public:
     Sha256();
     void update(const void* data, std::size_t size);
