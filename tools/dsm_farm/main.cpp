@@ -18,6 +18,7 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <iomanip>
 #include <iostream>
 #include <string>
 #include <thread>
@@ -244,7 +245,7 @@ int main(int argc, char** argv) {
                 else
                     std::cout << kToolName << ": wrote part " << index << " of " << farmPlan.parts.size()
                               << " (region " << region << ") to '" << dsm::farmPartPath(partsDir, index) << "' in "
-                              << r.stats.wallSeconds << " s\n";
+                              << std::fixed << std::setprecision(2) << r.stats.wallSeconds << " s\n";
             }
             return kExitOk;
         }

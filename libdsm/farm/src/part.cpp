@@ -47,17 +47,19 @@ std::string partName(std::uint32_t index, const char* extension) {
 }
 
 /// "field 'seed' is 1 in 'a' but 2 in 'b'" for the first field where the keys
-/// differ, nothing when they agree.
+/// differ (in the order of `there`, then the fields only `here` has), nothing
+/// when they agree.
 std::optional<std::string> keyDifference(const FarmBuildKey& here, const std::string& hereName,
                                          const FarmBuildKey& there, const std::string& thereName) {
-    const std::size_t n = std::max(here.size(), there.size());
-    for (std::size_t i = 0; i < n; ++i) {
-        const auto value = [&](const FarmBuildKey& key, const std::string& field) -> std::string {
-            for (const auto& [name, text] : key)
-                if (name == field) return text;
-            return "(absent)";
-        };
-        const std::string& field = i < here.size() ? here[i].first : there[i].first;
+    const auto value = [](const FarmBuildKey& key, const std::string& field) -> std::string {
+        for (const auto& [name, text] : key)
+            if (name == field) return text;
+        return "(absent)";
+    };
+    std::vector<std::string> fields;
+    for (const auto& [field, text] : there) fields.push_back(field);
+    for (const auto& [field, text] : here) fields.push_back(field);
+    for (const std::string& field : fields) {
         const std::string a = value(here, field), b = value(there, field);
         if (a != b)
             return concat("field '", field, "' is ", clip(a), " in ", hereName, " but ", clip(b), " in ", thereName);
@@ -75,8 +77,8 @@ std::optional<std::string> readText(const std::string& path) {
 }
 
 void writeRecord(const std::string& path, const FarmPart& part, const FarmBuildKey& key, const std::string& partFile) {
-    Json keyJson = Json::array();
-    for (const auto& [field, value] : key) keyJson.push_back(Json::array({field, value}));
+    Json keyJson = Json::object();
+    for (const auto& [field, value] : key) keyJson[field] = value;
     const Json record = {{kRecordMark, kRecordVersion},
                          {"index", part.index},
                          {"region", part.region},
@@ -156,14 +158,13 @@ FarmPartCheck checkFarmPart(const std::string& directory, std::uint32_t index, c
     if (record[kRecordMark] != kRecordVersion) return damaged("a part record of another layout version");
     const Json& key = record.value("key", Json());
     const Json& region = record.value("region", Json());
-    if (!record.value("index", Json()).is_number_unsigned() || !key.is_array() || !region.is_array() ||
+    if (!record.value("index", Json()).is_number_unsigned() || !key.is_object() || !region.is_array() ||
         region.size() != 4 || !record.value("part_sha256", Json()).is_string() ||
         !record.value("part_bytes", Json()).is_number_unsigned())
         return damaged("the record's fields are missing or of the wrong type");
-    for (const Json& field : key) {
-        if (!field.is_array() || field.size() != 2 || !field[0].is_string() || !field[1].is_string())
-            return damaged("the record's key is not a list of [field, value] strings");
-        check.key.emplace_back(field[0].get<std::string>(), field[1].get<std::string>());
+    for (const auto& [field, value] : key.items()) {
+        if (!value.is_string()) return damaged("the record's key field '" + clip(field) + "' is not a string");
+        check.key.emplace_back(field, value.get<std::string>());
     }
     for (std::size_t i = 0; i < 4; ++i) {
         if (!region[i].is_number_unsigned()) return damaged("the record's region is not 4 integers");

@@ -61,6 +61,7 @@ DSM_API FarmPlan planFarm(const Scene& scene, const BuildOptions& options, FarmG
 /// the map size, every option that changes the map's bytes, the seed, the
 /// grid, and the library version (which fixes the file format and codec).
 /// Options that do not change the bytes (threads, progress) are left out.
+/// Records keep the fields by name (so a record's key lists them in name order).
 using FarmBuildKey = std::vector<std::pair<std::string, std::string>>;
 DSM_API FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& options, FarmGrid grid);
 
