@@ -21,7 +21,7 @@ struct BuildOptionText {
     std::string tolerance = "auto";
     std::string filter = "gaussian";
     std::string mipLevels = "auto";
-    std::uint64_t maxSceneMiB = 256;
+    std::uint64_t maxSceneMiB = SceneReadOptions{}.maxBytes >> 20;
 };
 
 /// Declares -r, -s, -e, -f, -w, -m, -t, -l, --counts, --seed, -z and

@@ -3,6 +3,7 @@
 #include <dsm/sampler.h>
 #include <dsm/scene.h>
 
+#include "build_options.h"
 #include "option_checks.h"
 #include "tool_support.h"
 
@@ -20,9 +21,6 @@
 #include <unistd.h>
 
 namespace {
-
-/// A map is at most 131072 pixels wide: at most 18 mip levels.
-constexpr double kMaxMipLevels = 18;
 
 /// --region X0,Y0,X1,Y1: four decimal integers, X0 < X1 and Y0 < Y1 (an empty
 /// region is refused, not taken for the whole map).
@@ -43,15 +41,6 @@ std::array<std::uint32_t, 4> parseRegion(const std::string& text) {
     if (r[0] >= r[2] || r[1] >= r[3])
         throw std::invalid_argument("--region " + text + " is empty (X0 < X1 and Y0 < Y1 are needed)");
     return r;
-}
-
-// Parses "auto" or a number (0 is allowed where the option allows it).
-bool parseAutoOr(const std::string& text, double& value) {
-    if (text == "auto") return false;
-    std::size_t used = 0;
-    value = std::stod(text, &used);
-    if (used != text.size()) throw std::invalid_argument(text);
-    return true;
 }
 
 std::string humanBytes(double bytes) {
@@ -127,50 +116,21 @@ int main(int argc, char** argv) {
     using dsm::tools::finiteNumberIn, dsm::tools::integerIn, dsm::tools::LowerBound;
     CLI::App app{"dsm-build: render a scene from its light into a deep shadow map (.dsm)"};
     app.set_version_flag("--version", std::string("dsm-build ") + DSM_TOOLS_VERSION);
-    std::string scenePath, output, resolution, tolerance = "auto", filter = "gaussian", mipLevels = "auto", region;
+    std::string scenePath, output, region;
     std::string statsJson;
+    dsm::tools::BuildOptionText buildText;
     dsm::BuildOptions options;
     unsigned threads = 0;
     bool quiet = false;
     app.add_option("scene", scenePath, "Scene description (JSON, see spec/scene.md); - reads stdin")->required();
     app.add_option("-o,--output", output, "Output .dsm file")->required();
-    app.add_option("-r,--resolution", resolution, "Map size WxH or N (default: the scene light's)");
-    app.add_option("-s,--spp", options.samplesPerPixel, "Samples per pixel (stratified, jittered), 1..65536")
-        ->check(integerIn(1, 65536))
-        ->capture_default_str();
-    app.add_option("-e,--tolerance", tolerance, "Compression tolerance: auto (0.25/sqrt(spp)) or a value in [0, 1]")
-        ->capture_default_str();
-    app.add_option("-f,--filter", filter, "Pixel filter: box, triangle or gaussian")
-        ->check(CLI::IsMember({"box", "triangle", "gaussian"}))
-        ->capture_default_str();
-    app.add_option("-w,--filter-width", options.filterWidth, "Filter width in pixels, in (0, 64]")
-        ->check(finiteNumberIn(0.0, 64.0, LowerBound::Exclusive))
-        ->capture_default_str();
-    app.add_option("-m,--mip-levels", mipLevels, "Mip levels: auto (full pyramid) or N (1 = none)")
-        ->capture_default_str();
-    app.add_option("-t,--tile-size", options.tileSize, "Tile size: a power of two, 2..4096")
-        ->check(integerIn(2, 4096))
-        ->capture_default_str();
-    app.add_option("-l,--mtsm-layers", options.mtsmLayers, "Layers per pixel, 1..255 (> 1 builds an MTSM with counts)")
-        ->check(integerIn(1, 255))
-        ->capture_default_str();
-    app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
+    dsm::tools::addBuildOptions(app, buildText);
     app.add_option("--region", region, "Build only pixels X0,Y0,X1,Y1 (half-open), for distributed builds");
     app.add_option("-j,--threads", threads, "Worker threads (0 = all cores; more are clamped to the cores)")
         ->check(integerIn(0, UINT32_MAX))
         ->capture_default_str();
-    app.add_option("--seed", options.seed, "Random seed, an integer in [0, 2^64 - 1]")
-        ->check(integerIn(0, UINT64_MAX))
-        ->capture_default_str();
-    app.add_option("-z,--zlib-level", options.zlibLevel, "zlib level 0..9 (0 stores tiles)")
-        ->check(integerIn(0, 9))
-        ->capture_default_str();
     app.add_flag("-q,--quiet", quiet, "No progress or summary");
     app.add_option("--stats-json", statsJson, "Write the build statistics as JSON to this file");
-    std::uint64_t maxSceneMiB = dsm::SceneReadOptions{}.maxBytes >> 20;
-    app.add_option("--max-scene-mb", maxSceneMiB, "Largest scene read, in MiB, 1..1048576")
-        ->check(integerIn(1, 1u << 20))
-        ->capture_default_str();
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
@@ -185,38 +145,7 @@ int main(int argc, char** argv) {
     }
 
     try {
-        if (!resolution.empty()) {
-            if (resolution.find('-') != std::string::npos)
-                throw std::invalid_argument("--resolution expects positive WxH or N, got '" + resolution + "'");
-            unsigned w = 0, h = 0;
-            char x = 0, extra = 0;
-            std::istringstream in(resolution);
-            if ((in >> w) && in.eof()) {
-                h = w;
-            } else {
-                std::istringstream again(resolution);
-                if (!(again >> w >> x >> h) || x != 'x' || (again >> extra))
-                    throw std::invalid_argument("--resolution expects WxH or N, got '" + resolution + "'");
-            }
-            if (w == 0 || h == 0)
-                throw std::invalid_argument("--resolution expects positive WxH or N, got '" + resolution + "'");
-            options.width = w;
-            options.height = h;
-        }
-        double value = 0.0;
-        try {
-            if (parseAutoOr(tolerance, value)) options.tolerance = value;
-            if (parseAutoOr(mipLevels, value)) {
-                if (!(value >= 1.0 && value <= kMaxMipLevels) || value != std::floor(value))
-                    throw std::invalid_argument(mipLevels);
-                options.mipLevels = static_cast<unsigned>(value);
-            }
-        } catch (const std::exception&) {
-            throw std::invalid_argument("--tolerance and --mip-levels expect auto or a number");
-        }
-        if (options.tolerance && !(*options.tolerance >= 0.0 && *options.tolerance <= 1.0))
-            throw std::invalid_argument("--tolerance expects auto or a value in [0, 1], got '" + tolerance + "'");
-        options.filter = *dsm::pixelFilterFromName(filter);  // CLI11 checked the name
+        options = dsm::tools::parsedBuildOptions(buildText);
         if (app.count("--region")) options.region = parseRegion(region);
     } catch (const std::exception& e) {
         std::cerr << "dsm-build: " << e.what() << "\n";
@@ -231,7 +160,7 @@ int main(int argc, char** argv) {
         dsm::tools::checkOutputs(outputs, {scenePath});
         if (scenePath != "-") dsm::tools::requireRegularFile(scenePath);  // a FIFO would block the open
         dsm::SceneReadOptions sceneOptions;
-        sceneOptions.maxBytes = maxSceneMiB << 20;
+        sceneOptions.maxBytes = buildText.maxSceneMiB << 20;
         const dsm::Scene scene = scenePath == "-" ? dsm::readScene(std::cin, ".", "<stdin>", sceneOptions)
                                                   : dsm::loadScene(scenePath, sceneOptions);
         dsm::tools::checkOutputs(outputs, scene.files);
