@@ -245,7 +245,10 @@ int main(int argc, char** argv) {
                 else
                     std::cout << kToolName << ": wrote part " << index << " of " << farmPlan.parts.size()
                               << " (region " << region << ") to '" << dsm::farmPartPath(partsDir, index) << "' in "
-                              << std::fixed << std::setprecision(2) << r.stats.wallSeconds << " s\n";
+                              << std::fixed << std::setprecision(2) << r.stats.wallSeconds << " s (thread time "
+                              << r.stats.samplingSeconds + r.stats.sweepSeconds + r.stats.compressionSeconds +
+                                     r.stats.writingSeconds
+                              << " s)\n";
             }
             return kExitOk;
         }

@@ -11,6 +11,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <sstream>
 #include <thread>
 
@@ -83,11 +84,15 @@ std::vector<std::uint32_t> arrayIndices(std::string text) {
 }
 
 /// The state of each listed task of `jobId`; empty when Slurm no longer knows
-/// the job (gone after MinJobAge).
-std::map<std::uint32_t, std::string> jobStates(const std::string& jobId, bool array) {
+/// the job (gone after MinJobAge); nothing when scontrol failed otherwise (the
+/// controller busy or restarting: ask again).
+std::optional<std::map<std::uint32_t, std::string>> jobStates(const std::string& jobId, bool array) {
     std::map<std::uint32_t, std::string> states;
     const detail::CommandResult r = detail::runCommand({"scontrol", "-o", "show", "job", jobId});
-    if (r.status != 0) return states;
+    if (r.status != 0) {
+        if (r.output.find("Invalid job id") != std::string::npos) return states;
+        return std::nullopt;
+    }
     std::istringstream lines(r.output);
     std::string line;
     while (std::getline(lines, line)) {
@@ -100,6 +105,20 @@ std::map<std::uint32_t, std::string> jobStates(const std::string& jobId, bool ar
         for (const std::uint32_t index : arrayIndices(field(line, "ArrayTaskId"))) states[index] = state;
     }
     return states;
+}
+
+/// jobStates(), asked again while scontrol fails, for at most a minute.
+std::map<std::uint32_t, std::string> jobStatesRetried(const std::string& jobId, bool array) {
+    constexpr int kAttempts = 120;
+    for (int attempt = 1;; ++attempt) {
+        if (auto states = jobStates(jobId, array)) return *states;
+        if (attempt == kAttempts) {
+            const detail::CommandResult r = detail::runCommand({"scontrol", "-o", "show", "job", jobId});
+            throw Error(ErrorCode::io, concat("scontrol cannot show job ", jobId, " for a minute: ",
+                                              clip(r.output, 240)));
+        }
+        std::this_thread::sleep_for(kPollInterval);
+    }
 }
 
 FarmProgress progressOf(const std::map<std::uint32_t, TaskState>& tasks, Clock::time_point start,
@@ -138,7 +157,7 @@ FarmOutcome waitSlurm(const SlurmSubmission& submission, const FarmJob& job,
     total.total = static_cast<std::uint32_t>(job.indices.size());
     std::map<std::uint32_t, TaskState> tasks;
     for (;;) {
-        const auto states = jobStates(submission.partJobId, true);
+        const auto states = jobStatesRetried(submission.partJobId, true);
         bool finished = true;
         for (const std::uint32_t index : job.indices) {
             const auto it = states.find(index);
@@ -159,7 +178,7 @@ FarmOutcome waitSlurm(const SlurmSubmission& submission, const FarmJob& job,
     // The stitch ends soon after the parts: it runs, or is cancelled because
     // its dependency can never be met.
     for (;;) {
-        const auto states = jobStates(submission.stitchJobId, false);
+        const auto states = jobStatesRetried(submission.stitchJobId, false);
         if (states.empty()) {
             outcome.stitched = isStitched();
             outcome.stitchState = outcome.stitched ? "COMPLETED" : "UNKNOWN";

@@ -221,10 +221,12 @@ MergeReport stitchFarmParts(const std::string& directory, const std::string& out
     std::vector<std::uint32_t> recorded;
     for (fs::directory_iterator it(directory, ec), end; !ec && it != end; it.increment(ec)) {
         const std::string name = it->path().filename().string();
-        unsigned index = 0;
-        char tail = 0;
-        if (name.size() == 14 && std::sscanf(name.c_str(), "part-%4u.jso%c", &index, &tail) == 2 && tail == 'n')
-            recorded.push_back(index);
+        const std::string_view prefix = "part-", suffix = ".json";
+        if (name.size() <= prefix.size() + suffix.size() || !name.starts_with(prefix) || !name.ends_with(suffix))
+            continue;
+        const std::string digits = name.substr(prefix.size(), name.size() - prefix.size() - suffix.size());
+        if (digits.size() > 9 || digits.find_first_not_of("0123456789") != std::string::npos) continue;
+        recorded.push_back(static_cast<std::uint32_t>(std::stoul(digits)));
     }
     if (ec) throw Error(ErrorCode::io, concat(quotedPath(directory), ": cannot list the parts: ", ec.message()));
     std::sort(recorded.begin(), recorded.end());
