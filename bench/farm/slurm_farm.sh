@@ -23,7 +23,7 @@ options=(-r "$resolution" -s "$spp")
 
 t0=$(seconds)
 TIMEFORMAT='%U %S'
-{ time "$build" "$scene" -o "$root/one.dsm" "${options[@]}" -j "$slots" -q --stats-json "$root/one.json"; } 2>"$root/one.cpu"
+{ time "$build" "$scene" -o "$root/one.dsm" "${options[@]}" -j "$slots" -q; } 2>"$root/one.cpu"
 t1=$(seconds)
 "$farm" submit --engine slurm "$scene" -o "$root/farm.dsm" --tiles "$parts" "${options[@]}" --cpus-per-task 1 \
   --threads 1 --wait -q >/dev/null
@@ -32,16 +32,15 @@ cmp "$root/one.dsm" "$root/farm.dsm"
 { time "$farm" stitch "$root/farm.dsm.parts" -o "$root/again.dsm" -q; } 2>"$root/stitch.cpu"
 t3=$(seconds)
 
-part_seconds=$(sed -n 's/.* in \([0-9.]*\) s (thread time.*/\1/p' "$root"/farm.dsm.parts/logs/part-*.log | paste -sd+ | bc -l)
-part_threads=$(sed -n 's/.*(thread time \([0-9.]*\) s)$/\1/p' "$root"/farm.dsm.parts/logs/part-*.log | paste -sd+ | bc -l)
-one_threads=$(sed -n 's/.*"\(sampling\|sweep\|compression\|writing\)_seconds": \([0-9.e+-]*\).*/\2/p' "$root/one.json" | paste -sd+ | bc -l)
+part_seconds=$(sed -n 's/.* in \([0-9.]*\) s (process CPU.*/\1/p' "$root"/farm.dsm.parts/logs/part-*.log | paste -sd+ | bc -l)
+part_cpu=$(sed -n 's/.*(process CPU \([0-9.]*\) s)$/\1/p' "$root"/farm.dsm.parts/logs/part-*.log | paste -sd+ | bc -l)
 part_bytes=$(cat "$root"/farm.dsm.parts/part-*.dsm | wc -c)
 map_bytes=$(wc -c <"$root/one.dsm")
 awk -v one="$(echo "$t1 - $t0" | bc -l)" -v farm="$(echo "$t2 - $t1" | bc -l)" \
     -v stitch="$(echo "$t3 - $t2" | bc -l)" -v parts="$parts" -v slots="$slots" -v built="$part_seconds" \
     -v part_bytes="$part_bytes" -v map_bytes="$map_bytes" -v res="$resolution" -v spp="$spp" \
     -v one_cpu="$(awk '{print $1 + $2}' "$root/one.cpu")" -v stitch_cpu="$(awk '{print $1 + $2}' "$root/stitch.cpu")" \
-    -v part_threads="$part_threads" -v one_threads="$one_threads" 'BEGIN {
+    -v part_cpu="$part_cpu" 'BEGIN {
   overhead = ((farm - stitch) * slots - built) / parts
   printf "| %s² at %s spp, %d parts, %d slots | value |\n|---|---:|\n", res, spp, parts, slots
   printf "| one-machine build (dsm-build -j %d), wall | %.1f s |\n", slots, one
@@ -49,8 +48,8 @@ awk -v one="$(echo "$t1 - $t0" | bc -l)" -v farm="$(echo "$t2 - $t1" | bc -l)" \
   printf "| one-machine build, CPU time (user + system) | %.1f s |\n", one_cpu
   printf "| ratio farm / one machine, wall | %.2f |\n", farm / one
   printf "| parts building (their own wall, one thread each), summed | %.1f s |\n", built
-  printf "| one-machine build, thread time (sampling + sweep + compression + writing) | %.1f s |\n", one_threads
-  printf "| parts, thread time summed | %.1f s |\n", part_threads
+  printf "| parts, process CPU time summed (scene read and hash included) | %.1f s |\n", part_cpu
+  printf "| CPU ratio parts / one machine | %.3f |\n", part_cpu / one_cpu
   printf "| stitch (dsm-farm stitch, measured alone), wall | %.2f s |\n", stitch
   printf "| stitch, CPU time (user + system) | %.2f s |\n", stitch_cpu
   printf "| overhead per part (slot time not building) | %.2f s |\n", overhead
