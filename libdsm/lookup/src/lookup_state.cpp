@@ -443,8 +443,12 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
     const MapInfo& info = map.info;
     const std::uint32_t T = info.tileSize;
     const std::uint64_t tilesX = info.levels[0].tilesX;
-    // After every tile's keys: the points looked up in their own space.
-    const std::uint64_t kNoTile = (tilesX * info.levels[0].tilesY) << 24;
+    // A key is the tile, then the pixel within it, in as few bits as they
+    // need (a tile of at most 4096 x 4096 pixels, the reader's limit, and
+    // fewer than 2^40 tiles fit 64 bits); after every tile's keys, the
+    // points looked up in their own space.
+    const int pixelBits = std::bit_width(std::uint64_t(T) * T - 1);
+    const std::uint64_t kNoTile = (tilesX * info.levels[0].tilesY) << pixelBits;
     for (std::size_t i = 0; i < n; ++i) {
         std::uint64_t key = kNoTile;
         double rx = 0.0, ry = 0.0, z = 0.0;
@@ -457,27 +461,29 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
         if (inside && rx >= 0.0 && ry >= 0.0 && rx < static_cast<double>(info.width) &&
             ry < static_cast<double>(info.height))
         {
-            // The tile, then the pixel within it: a tile's points are taken
-            // in the order its records and arrays lie in memory. A tile
-            // index below 2^40 and a pixel index below 2^24 (tiles of at
-            // most 4096 x 4096, the reader's limit) fit one key.
+            // A tile's points are taken in the order its records and arrays
+            // lie in memory.
             const std::uint64_t px = static_cast<std::uint64_t>(rx), py = static_cast<std::uint64_t>(ry);
-            key = ((py / T) * tilesX + px / T) << 24 | ((py % T) * T + px % T);
+            key = ((py / T) * tilesX + px / T) << pixelBits | ((py % T) * T + px % T);
         }
         batchOrder_[i] = BatchItem{key, i, {rx, ry, z}};
     }
     // A radix sort on the key's bits in use: a few linear passes instead of
-    // n log n comparisons, so that ordering costs less than it saves.
-    constexpr int kDigitBits = 11;
+    // n log n comparisons, so that ordering costs less than it saves. The
+    // fewest passes of digits of at most 12 bits, the digits as even as
+    // they can be (a 512² map of 32² tiles: two passes of 9 bits).
+    constexpr int kMaxDigitBits = 12;
     const int keyBits = std::bit_width(kNoTile);
-    std::uint32_t counts[1u << kDigitBits];
-    for (int shift = 0; shift < keyBits; shift += kDigitBits) {
-        std::fill(std::begin(counts), std::end(counts), 0u);
-        for (std::size_t i = 0; i < n; ++i) ++counts[(batchOrder_[i].key >> shift) & ((1u << kDigitBits) - 1)];
+    const int passes = (keyBits + kMaxDigitBits - 1) / kMaxDigitBits;
+    const int digitBits = passes == 0 ? 0 : (keyBits + passes - 1) / passes;
+    const std::uint64_t digitMask = (std::uint64_t(1) << digitBits) - 1;
+    std::uint32_t counts[1u << kMaxDigitBits];
+    for (int shift = 0; shift < keyBits; shift += digitBits) {
+        std::fill(counts, counts + digitMask + 1, 0u);
+        for (std::size_t i = 0; i < n; ++i) ++counts[(batchOrder_[i].key >> shift) & digitMask];
         std::uint32_t start = 0;
-        for (std::uint32_t& c : counts) start += std::exchange(c, start);
-        for (std::size_t i = 0; i < n; ++i)
-            batchScratch_[counts[(batchOrder_[i].key >> shift) & ((1u << kDigitBits) - 1)]++] = batchOrder_[i];
+        for (std::uint64_t d = 0; d <= digitMask; ++d) start += std::exchange(counts[d], start);
+        for (std::size_t i = 0; i < n; ++i) batchScratch_[counts[(batchOrder_[i].key >> shift) & digitMask]++] = batchOrder_[i];
         batchOrder_.swap(batchScratch_);
     }
     for (std::size_t j = 0; j < n; ++j) {
