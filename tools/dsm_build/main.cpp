@@ -127,7 +127,8 @@ int main(int argc, char** argv) {
     using dsm::tools::finiteNumberIn, dsm::tools::integerIn, dsm::tools::LowerBound;
     CLI::App app{"dsm-build: render a scene from its light into a deep shadow map (.dsm)"};
     app.set_version_flag("--version", std::string("dsm-build ") + DSM_TOOLS_VERSION);
-    std::string scenePath, output, resolution, tolerance = "auto", filter = "gaussian", mipLevels = "auto", region;
+    std::string scenePath, output, resolution, tolerance = "auto", filter = "gaussian", mipLevels = "auto", region,
+                sampler = "scanline";
     std::string statsJson;
     dsm::BuildOptions options;
     unsigned threads = 0;
@@ -153,6 +154,10 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     app.add_option("-l,--mtsm-layers", options.mtsmLayers, "Layers per pixel, 1..255 (> 1 builds an MTSM with counts)")
         ->check(integerIn(1, 255))
+        ->capture_default_str();
+    app.add_option("--sampler", sampler,
+                   "How samples find surfaces: scanline (primitives bucketed by tile) or raytrace (a ray per sample)")
+        ->check(CLI::IsMember({"scanline", "raytrace"}))
         ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_option("--region", region, "Build only pixels X0,Y0,X1,Y1 (half-open), for distributed builds");
@@ -217,6 +222,7 @@ int main(int argc, char** argv) {
         if (options.tolerance && !(*options.tolerance >= 0.0 && *options.tolerance <= 1.0))
             throw std::invalid_argument("--tolerance expects auto or a value in [0, 1], got '" + tolerance + "'");
         options.filter = *dsm::pixelFilterFromName(filter);  // CLI11 checked the name
+        options.sampler = sampler == "raytrace" ? dsm::SamplerMethod::raytrace : dsm::SamplerMethod::scanline;
         if (app.count("--region")) options.region = parseRegion(region);
     } catch (const std::exception& e) {
         std::cerr << "dsm-build: " << e.what() << "\n";
