@@ -97,6 +97,19 @@ inline ::testing::AssertionResult sameFunction(const VisibilityView& got, const 
     return ::testing::AssertionSuccess();
 }
 
+/// Every level-0 pixel of `got` is the same function as `want`'s, to the bit
+/// (maps of one size; reports the first pixel that differs).
+inline void expectSamePixels(const DeepShadowMap& got, const DeepShadowMap& want) {
+    ASSERT_EQ(got.info().width, want.info().width);
+    ASSERT_EQ(got.info().height, want.info().height);
+    ASSERT_EQ(got.info().hasCounts, want.info().hasCounts);
+    for (std::uint32_t y = 0; y < want.info().height; ++y)
+        for (std::uint32_t x = 0; x < want.info().width; ++x)
+            ASSERT_TRUE(sameFunction(got.pixel(0, x, y).view(), want.pixel(0, x, y).view().toFunction(),
+                                     want.info().hasCounts))
+                << "pixel " << x << "," << y;
+}
+
 /// A random valid function: `layers` layers (each at least one vertex), about
 /// `vertices` vertices per layer, with vertical steps, depths from `zStart`.
 inline VisibilityFunction randomFunction(std::mt19937_64& rng, int channels, bool counts, int layers, int vertices,

@@ -136,10 +136,13 @@ TEST(FarmKey, RecordsEveryOptionThatChangesTheBytes) {
     seed.seed = 2;
     dsm::BuildOptions zlib = smallOptions();
     zlib.zlibLevel = 1;
+    dsm::BuildOptions sampler = smallOptions();
+    sampler.sampler = dsm::SamplerMethod::raytrace;  // the metadata records it
     dsm::BuildOptions threads = smallOptions();
     threads.threads = 2;  // does not change the bytes
     EXPECT_NE(dsm::farmBuildKey(scene, seed, {2, 2}), base);
     EXPECT_NE(dsm::farmBuildKey(scene, zlib, {2, 2}), base);
+    EXPECT_NE(dsm::farmBuildKey(scene, sampler, {2, 2}), base);
     EXPECT_NE(dsm::farmBuildKey(scene, smallOptions(), {4, 1}), base);
     EXPECT_EQ(dsm::farmBuildKey(scene, threads, {2, 2}), base);
 }

@@ -38,12 +38,15 @@
 #include <variant>
 #include <vector>
 
+#include "map_fixtures.h"
+
 #include "temp_dir.h"
 
 namespace {
 
 using dsm::Vec3;
 using dsm::test::TempDir;
+using dsm::test::expectSamePixels;
 
 constexpr double kPi = 3.14159265358979323846;
 // float32 storage of values (relative 2^-24, a few roundings) and of depths
@@ -134,11 +137,22 @@ dsm::BuildOptions boxOptions(std::uint32_t spp, double tolerance) {
     return o;
 }
 
+// Builds with the scanline sampler (the default) and, beside it, with the
+// ray-casting one: every level-0 pixel of the two maps must be the same
+// function, so each accuracy bound below holds for both samplers.
 std::shared_ptr<dsm::DeepShadowMap> build(const dsm::Scene& scene, const dsm::BuildOptions& options,
                                           const std::string& path) {
-    dsm::buildMap(scene, options, path);
+    dsm::BuildOptions scanline = options, raytrace = options;
+    scanline.sampler = dsm::SamplerMethod::scanline;
+    raytrace.sampler = dsm::SamplerMethod::raytrace;
+    dsm::buildMap(scene, scanline, path);
     dsm::validate(path);
-    return dsm::DeepShadowMap::open(path);
+    const std::string rayPath = path + ".raytrace.dsm";
+    dsm::buildMap(scene, raytrace, rayPath);
+    auto map = dsm::DeepShadowMap::open(path);
+    expectSamePixels(*map, *dsm::DeepShadowMap::open(rayPath));
+    std::remove(rayPath.c_str());
+    return map;
 }
 
 std::string readBytes(const std::string& path) {

@@ -55,6 +55,10 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
     app.add_option("-l,--mtsm-layers", options.mtsmLayers, "Layers per pixel, 1..255 (> 1 builds an MTSM with counts)")
         ->check(integerIn(1, 255))
         ->capture_default_str();
+    app.add_option("--sampler", text.sampler,
+                   "How samples find surfaces: scanline (primitives bucketed by tile) or raytrace (a ray per sample)")
+        ->check(CLI::IsMember({"scanline", "raytrace"}))
+        ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_option("--seed", options.seed, "Random seed, an integer in [0, 2^64 - 1]")
         ->check(integerIn(0, UINT64_MAX))
@@ -102,6 +106,7 @@ BuildOptions parsedBuildOptions(const BuildOptionText& text) {
     if (options.tolerance && !(*options.tolerance >= 0.0 && *options.tolerance <= 1.0))
         throw std::invalid_argument("--tolerance expects auto or a value in [0, 1], got '" + text.tolerance + "'");
     options.filter = *pixelFilterFromName(text.filter);  // CLI11 checked the name
+    options.sampler = text.sampler == "raytrace" ? SamplerMethod::raytrace : SamplerMethod::scanline;
     return options;
 }
 
@@ -116,6 +121,7 @@ std::vector<std::string> buildOptionArguments(const BuildOptions& options, std::
     args.insert(args.end(), {"--mip-levels", options.mipLevels ? std::to_string(*options.mipLevels) : "auto"});
     args.insert(args.end(), {"--tile-size", std::to_string(options.tileSize)});
     args.insert(args.end(), {"--mtsm-layers", std::to_string(options.mtsmLayers)});
+    args.insert(args.end(), {"--sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"});
     if (options.counts) args.push_back("--counts");
     args.insert(args.end(), {"--seed", std::to_string(options.seed)});
     args.insert(args.end(), {"--zlib-level", std::to_string(options.zlibLevel)});

@@ -1,6 +1,7 @@
-// All-hits ray casting of a scene's surfaces and volumes from the light
-// (internal). Rays are parametrised by light-space depth: a point at
-// parameter t lies at depth t, so hit parameters are map depths directly.
+// All-hits ray casting of a scene's surfaces (through a bounding volume
+// hierarchy) and volumes from the light (internal). Rays are parametrised by
+// light-space depth: a point at parameter t lies at depth t, so hit
+// parameters are map depths directly.
 #pragma once
 
 #include <array>
@@ -9,15 +10,11 @@
 #include <vector>
 
 #include "density.h"
+#include "scene_primitives.h"
 #include "dsm/scene.h"
 #include "tested_internal.h"
 
 DSM_NAMESPACE_BEGIN
-
-struct RaySurfaceHit {
-    double t;
-    std::uint32_t object;
-};
 
 struct RayVolumeSample {
     double t;
@@ -28,7 +25,10 @@ struct RayVolumeSample {
 /// Immutable after construction and safe to use from many threads.
 class DSM_TESTED_INTERNAL RayCaster {
 public:
-    explicit RayCaster(const Scene& scene);
+    /// Whether surfaceHits() may be called: the hierarchy over the surfaces
+    /// is built only when it is (the scanline sampler visits them itself).
+    enum class Surfaces { hierarchy, none };
+    explicit RayCaster(const Scene& scene, Surfaces surfaces = Surfaces::hierarchy);
     ~RayCaster();
     RayCaster(const RayCaster&) = delete;
     RayCaster& operator=(const RayCaster&) = delete;
@@ -48,6 +48,7 @@ public:
 
     bool hasVolumes() const;
     std::size_t primitiveCount() const;
+    const ScenePrimitives& surfaces() const;
 
 private:
     struct Impl;

@@ -6,6 +6,7 @@
 #include <cmath>
 #include <filesystem>
 #include <mutex>
+#include <optional>
 #include <vector>
 
 #include <nlohmann/json.hpp>
@@ -24,6 +25,7 @@
 #include "light_rays.h"
 #include "pixel_filter.h"
 #include "ray_caster.h"
+#include "scanline_hider.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -55,6 +57,7 @@ struct SampleData {
     std::vector<SurfaceHit> hits;
     std::vector<VolumeSample> volume;
     double x = 0.0, y = 0.0;  // raster position
+    double time = 0.0;        // in the shutter, [0, 1)
 };
 
 struct TileStats {
@@ -134,7 +137,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     const std::uint32_t gridY = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(spp)))));
     const std::uint32_t gridX = (spp + gridY - 1) / gridY;
 
-    const RayCaster caster(scene);
+    const bool scanline = options.sampler == SamplerMethod::scanline;
+    const RayCaster caster(scene, scanline ? RayCaster::Surfaces::none : RayCaster::Surfaces::hierarchy);
 
     WriterOptions w;
     w.width = W;
@@ -163,6 +167,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
               {"mtsm_layers", options.mtsmLayers},
               {"area_light_radius", light.areaLightRadius},
               {"seed", options.seed},
+              {"sampler", scanline ? "scanline" : "raytrace"},
               {"region", region}}}};
         if (scene.source.size() <= 65536) m["scene_json"] = scene.source;
         w.metadata = m.dump();
@@ -175,9 +180,12 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     compression.keepCounts = counts;
     compression.maxLayers = options.mtsmLayers;
 
-    // Samples of one sample pixel, generated and cast on demand.
-    auto castPixel = [&](std::uint32_t px, std::uint32_t py, std::vector<SampleData>& out, TileStats& stats) {
-        const auto start = Clock::now();
+    std::optional<ScanlineHider> hider;
+    if (scanline) hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach));
+
+    // The samples of one sample pixel: positions and times, from the pixel's
+    // own seed (so a pixel's samples do not depend on the tile or region).
+    auto placeSamples = [&](std::uint32_t px, std::uint32_t py, std::vector<SampleData>& out) {
         detail::SplitMix64 rng(detail::pixelSeed(options.seed, px, py));
         std::vector<std::uint32_t> timeSlot(spp);
         for (std::uint32_t k = 0; k < spp; ++k) timeSlot[k] = k;
@@ -190,8 +198,6 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
         if (cell.size() > spp)
             for (std::uint32_t k = 0; k < spp; ++k)
                 std::swap(cell[k], cell[k + rng.next() % (cell.size() - k)]);
-        std::vector<RaySurfaceHit> hits;
-        std::vector<RayVolumeSample> volume;
         out.resize(spp);
         for (std::uint32_t k = 0; k < spp; ++k) {
             SampleData& s = out[k];
@@ -200,21 +206,67 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             const std::uint32_t cx = cell[k] % gridX, cy = cell[k] / gridX;
             s.x = px + (cx + rng.uniform()) / gridX;
             s.y = py + (cy + rng.uniform()) / gridY;
-            const double time = (timeSlot[k] + rng.uniform()) / spp;
-            Vec3 o, d;
-            frame.ray(s.x, s.y, o, d);
-            hits.clear();
-            caster.surfaceHits(o, d, time, camera.nearPlane, hits);
-            for (const RaySurfaceHit& h : hits) {
-                const Rgb& opacity = scene.objects[h.object].opacity;
-                s.hits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
-            }
-            volume.clear();
-            caster.volumeSamples(o, d, time, camera.nearPlane, volume);
-            for (const RayVolumeSample& v : volume)
-                s.volume.push_back({static_cast<float>(v.t), static_cast<float>(v.extinction)});
+            s.time = (timeSlot[k] + rng.uniform()) / spp;
         }
-        stats.samples += spp;
+    };
+    auto addSurfaceHits = [&](const std::vector<RaySurfaceHit>& hits, SampleData& s) {
+        for (const RaySurfaceHit& h : hits) {
+            const Rgb& opacity = scene.objects[h.object].opacity;
+            s.hits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
+        }
+    };
+    auto addVolumeSamples = [&](const Vec3& o, const Vec3& d, SampleData& s, std::vector<RayVolumeSample>& volume) {
+        if (!caster.hasVolumes()) return;
+        volume.clear();
+        caster.volumeSamples(o, d, s.time, camera.nearPlane, volume);
+        for (const RayVolumeSample& v : volume) s.volume.push_back({static_cast<float>(v.t), static_cast<float>(v.extinction)});
+    };
+
+    // The samples of the sample pixels [x0, x1) x [y0, y1) of tile (tx, ty),
+    // placed and given what they cross; samples[(y - y0) * (x1 - x0) + (x - x0)]
+    // holds pixel (x, y)'s.
+    auto sampleTile = [&](std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels,
+                          std::vector<std::vector<SampleData>>& samples, TileStats& stats) {
+        const auto start = Clock::now();
+        const std::uint32_t sw = pixels[2] - pixels[0];
+        samples.resize(std::size_t(sw) * (pixels[3] - pixels[1]));
+        for (std::uint32_t y = pixels[1]; y < pixels[3]; ++y)
+            for (std::uint32_t x = pixels[0]; x < pixels[2]; ++x)
+                placeSamples(x, y, samples[std::size_t(y - pixels[1]) * sw + (x - pixels[0])]);
+        std::vector<RaySurfaceHit> rayHits;
+        std::vector<RayVolumeSample> volume;
+        if (hider) {
+            std::vector<HiderSample> points;
+            points.reserve(samples.size() * spp);
+            for (const auto& pixel : samples)
+                for (const SampleData& s : pixel) {
+                    HiderSample& h = points.emplace_back();
+                    h.x = s.x;
+                    h.y = s.y;
+                    h.time = s.time;
+                    frame.ray(s.x, s.y, h.origin, h.direction);
+                }
+            std::vector<std::vector<RaySurfaceHit>> hits;
+            hider->tileHits(tx, ty, pixels, spp, points, camera.nearPlane, hits);
+            std::size_t i = 0;
+            for (auto& pixel : samples)
+                for (SampleData& s : pixel) {
+                    addSurfaceHits(hits[i], s);
+                    addVolumeSamples(points[i].origin, points[i].direction, s, volume);
+                    ++i;
+                }
+        } else {
+            for (auto& pixel : samples)
+                for (SampleData& s : pixel) {
+                    Vec3 o, d;
+                    frame.ray(s.x, s.y, o, d);
+                    rayHits.clear();
+                    caster.surfaceHits(o, d, s.time, camera.nearPlane, rayHits);
+                    addSurfaceHits(rayHits, s);
+                    addVolumeSamples(o, d, s, volume);
+                }
+        }
+        stats.samples += samples.size() * spp;
         stats.castSeconds += since(start);
     };
 
@@ -231,19 +283,17 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
         const std::uint32_t sx0 = rx0 >= std::uint32_t(reach) ? rx0 - reach : 0, sx1 = std::min(rx1 + reach, W);
         const std::uint32_t sy0 = ry0 >= std::uint32_t(reach) ? ry0 - reach : 0, sy1 = std::min(ry1 + reach, H);
         const std::uint32_t sw = sx1 - sx0;
-        std::vector<std::vector<SampleData>> samples(std::size_t(sw) * (sy1 - sy0));
-        for (std::uint32_t y = sy0; y < sy1; ++y)
-            for (std::uint32_t x = sx0; x < sx1; ++x) {
-                auto& s = samples[std::size_t(y - sy0) * sw + (x - sx0)];
-                castPixel(x, y, s, stats);
-                if (x >= rx0 && x < rx1 && y >= ry0 && y < ry1) {
-                    for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
-                    if (options.sampleRays) {
-                        std::vector<SampleRay> own;
-                        own.reserve(s.size());
-                        for (const SampleData& d : s) own.push_back({d.hits, d.volume});
-                        options.sampleRays(x, y, own);
-                    }
+        std::vector<std::vector<SampleData>> samples;
+        sampleTile(tx, ty, {sx0, sy0, sx1, sy1}, samples, stats);
+        for (std::uint32_t y = ry0; y < ry1; ++y)
+            for (std::uint32_t x = rx0; x < rx1; ++x) {
+                const auto& s = samples[std::size_t(y - sy0) * sw + (x - sx0)];
+                for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
+                if (options.sampleRays) {
+                    std::vector<SampleRay> own;
+                    own.reserve(s.size());
+                    for (const SampleData& d : s) own.push_back({d.hits, d.volume});
+                    options.sampleRays(x, y, own);
                 }
             }
         std::vector<SampleRay> rays;

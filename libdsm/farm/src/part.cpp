@@ -126,6 +126,7 @@ FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& options, FarmG
             {"mtsm_layers", std::to_string(options.mtsmLayers)},
             {"counts", options.counts ? "true" : "false"},
             {"seed", std::to_string(options.seed)},
+            {"sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"},
             {"zlib_level", std::to_string(options.zlibLevel)},
             {"grid", concat(grid.columns, "x", grid.rows)},
             {"library", libraryVersion()}};

@@ -111,6 +111,25 @@ bool isBilinear(PixelFilter filter, double width) {
     return channels;
 }
 
+// Visibility of pixel p of a monochrome map's tile at depth z: evaluatePixel
+// for one channel, with the same rules and arithmetic.
+[[gnu::always_inline]] inline double evaluateMonoPixel(const format::DecodedTile& t, std::size_t p, double z) {
+    const format::PixelRecord& a = t.records()[p];
+    const format::PixelRecord& b = t.records()[p + 1];
+    std::size_t end0 = b.vertexStart - a.vertexStart;
+    if (end0 == 0) return 1.0;
+    const float* zs = t.depths() + a.vertexStart;
+    if (b.layerStart != a.layerStart) [[unlikely]] {
+        end0 = t.layerStarts()[a.layerStart];
+        if (z >= static_cast<double>(zs[end0 - 1])) return 0.0;
+    }
+    const std::size_t k = detail::firstDepthAbove(zs, end0, z);
+    const float* vs = t.values() + a.valueStart;
+    if (k == 0) return 1.0;
+    if (k == end0) return static_cast<double>(vs[end0 - 1]);
+    return detail::lerpSegment(zs[k - 1], vs[k - 1], zs[k], vs[k], z);
+}
+
 // The argument error of a lookup (kept out of the lookup's own code).
 [[noreturn, gnu::noinline, gnu::cold]] void throwBadArguments(double rx, double ry, double z,
                                                              const LookupOptions& options) {
@@ -212,7 +231,7 @@ const format::DecodedTile& LookupState::tile(const MapImpl& map, unsigned level,
 // axis are the only ones with non-zero weight, visited in the general path's
 // order (rows, then columns) with the same weights, so the result is the same
 // to the bit.
-double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx, double cy, double z,
+[[gnu::always_inline]] inline double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx, double cy, double z,
                                   PixelFilter filter, double width, double out[3], int& pixelsUsed) {
     const LevelInfo& L = map.info.levels[level];
     const double r = 0.5 * width;
@@ -231,14 +250,13 @@ double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx,
         const format::DecodedTile& t =
             tile(map, level, static_cast<std::uint32_t>(x0) / T, static_cast<std::uint32_t>(y0) / T);
         const std::size_t p = std::size_t(static_cast<std::uint32_t>(y0) % T) * t.width + static_cast<std::uint32_t>(x0) % T;
-        double v00[3], v01[3], v10[3], v11[3];
-        evaluatePixel(t, p, z, v00);
-        evaluatePixel(t, p + 1, z, v01);
-        evaluatePixel(t, p + t.width, z, v10);
-        evaluatePixel(t, p + t.width + 1, z, v11);
+        const double v00 = evaluateMonoPixel(t, p, z);
+        const double v01 = evaluateMonoPixel(t, p + 1, z);
+        const double v10 = evaluateMonoPixel(t, p + t.width, z);
+        const double v11 = evaluateMonoPixel(t, p + t.width + 1, z);
         const double w00 = wxs[0] * wys[0], w01 = wxs[1] * wys[0], w10 = wxs[0] * wys[1], w11 = wxs[1] * wys[1];
         const double total = w00 + w01 + w10 + w11;
-        out[0] = w00 * v00[0] + w01 * v01[0] + w10 * v10[0] + w11 * v11[0];
+        out[0] = w00 * v00 + w01 * v01 + w10 * v10 + w11 * v11;
         pixelsUsed += (w00 != 0.0) + (w01 != 0.0) + (w10 != 0.0) + (w11 != 0.0);
         if (total > 0.0) out[0] /= total;
         out[1] = out[2] = out[0];
@@ -254,7 +272,7 @@ double LookupState::bilinearLevel(const MapImpl& map, unsigned level, double cx,
 }
 
 // Filtered visibility of one level; returns the total weight used.
-double LookupState::filterLevel(const MapImpl& map, unsigned level, double rx, double ry, double z, double width,
+[[gnu::always_inline]] inline double LookupState::filterLevel(const MapImpl& map, unsigned level, double rx, double ry, double z, double width,
                                 PixelFilter filter, double out[3], int& pixelsUsed) {
     const double scale = levelScale(level);
     if (isBilinear(filter, width))
@@ -352,6 +370,7 @@ LookupResult LookupState::raster(const MapImpl& map, double rx, double ry, doubl
 
 LookupResult LookupState::at(const MapImpl& map, LookupSpace space, const std::array<double, 3>& p,
                              const LookupOptions& options) {
+    if (space == LookupSpace::raster) return raster(map, p[0], p[1], p[2], options);
     double rx, ry, z;
     if (!toRaster(map.info, space, p, rx, ry, z)) {
         LookupResult lit;
@@ -424,8 +443,12 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
     const MapInfo& info = map.info;
     const std::uint32_t T = info.tileSize;
     const std::uint64_t tilesX = info.levels[0].tilesX;
-    // After every tile's keys: the points looked up in their own space.
-    const std::uint64_t kNoTile = (tilesX * info.levels[0].tilesY) << 24;
+    // A key is the tile, then the pixel within it, in as few bits as they
+    // need (a tile of at most 4096 x 4096 pixels, the reader's limit, and
+    // fewer than 2^40 tiles fit 64 bits); after every tile's keys, the
+    // points looked up in their own space.
+    const int pixelBits = std::bit_width(std::uint64_t(T) * T - 1);
+    const std::uint64_t kNoTile = (tilesX * info.levels[0].tilesY) << pixelBits;
     for (std::size_t i = 0; i < n; ++i) {
         std::uint64_t key = kNoTile;
         double rx = 0.0, ry = 0.0, z = 0.0;
@@ -438,27 +461,29 @@ std::size_t LookupState::tryBatchPart(const MapImpl& map, LookupSpace space, Spa
         if (inside && rx >= 0.0 && ry >= 0.0 && rx < static_cast<double>(info.width) &&
             ry < static_cast<double>(info.height))
         {
-            // The tile, then the pixel within it: a tile's points are taken
-            // in the order its records and arrays lie in memory. A tile
-            // index below 2^40 and a pixel index below 2^24 (tiles of at
-            // most 4096 x 4096, the reader's limit) fit one key.
+            // A tile's points are taken in the order its records and arrays
+            // lie in memory.
             const std::uint64_t px = static_cast<std::uint64_t>(rx), py = static_cast<std::uint64_t>(ry);
-            key = ((py / T) * tilesX + px / T) << 24 | ((py % T) * T + px % T);
+            key = ((py / T) * tilesX + px / T) << pixelBits | ((py % T) * T + px % T);
         }
         batchOrder_[i] = BatchItem{key, i, {rx, ry, z}};
     }
     // A radix sort on the key's bits in use: a few linear passes instead of
-    // n log n comparisons, so that ordering costs less than it saves.
-    constexpr int kDigitBits = 11;
+    // n log n comparisons, so that ordering costs less than it saves. The
+    // fewest passes of digits of at most 12 bits, the digits as even as
+    // they can be (a 512² map of 32² tiles: two passes of 9 bits).
+    constexpr int kMaxDigitBits = 12;
     const int keyBits = std::bit_width(kNoTile);
-    std::uint32_t counts[1u << kDigitBits];
-    for (int shift = 0; shift < keyBits; shift += kDigitBits) {
-        std::fill(std::begin(counts), std::end(counts), 0u);
-        for (std::size_t i = 0; i < n; ++i) ++counts[(batchOrder_[i].key >> shift) & ((1u << kDigitBits) - 1)];
+    const int passes = (keyBits + kMaxDigitBits - 1) / kMaxDigitBits;
+    const int digitBits = passes == 0 ? 0 : (keyBits + passes - 1) / passes;
+    const std::uint64_t digitMask = (std::uint64_t(1) << digitBits) - 1;
+    std::uint32_t counts[1u << kMaxDigitBits];
+    for (int shift = 0; shift < keyBits; shift += digitBits) {
+        std::fill(counts, counts + digitMask + 1, 0u);
+        for (std::size_t i = 0; i < n; ++i) ++counts[(batchOrder_[i].key >> shift) & digitMask];
         std::uint32_t start = 0;
-        for (std::uint32_t& c : counts) start += std::exchange(c, start);
-        for (std::size_t i = 0; i < n; ++i)
-            batchScratch_[counts[(batchOrder_[i].key >> shift) & ((1u << kDigitBits) - 1)]++] = batchOrder_[i];
+        for (std::uint64_t d = 0; d <= digitMask; ++d) start += std::exchange(counts[d], start);
+        for (std::size_t i = 0; i < n; ++i) batchScratch_[counts[(batchOrder_[i].key >> shift) & digitMask]++] = batchOrder_[i];
         batchOrder_.swap(batchScratch_);
     }
     for (std::size_t j = 0; j < n; ++j) {

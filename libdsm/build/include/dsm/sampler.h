@@ -16,6 +16,18 @@
 
 DSM_NAMESPACE_BEGIN
 
+/// How a build's samples find the surfaces they cross. Both give each
+/// sample the same crossings (the exact crossings of the ray through it, at
+/// its time); volumes are ray-marched per sample by both.
+enum class SamplerMethod {
+    /// Primitives bucketed once into the tiles they reach, then each
+    /// tested against the tile's samples under its projected bounds.
+    scanline,
+    /// A ray cast per sample through a bounding volume hierarchy (the
+    /// cross-check).
+    raytrace,
+};
+
 struct BuildOptions {
     /// Image size, each >= 1; unset keeps the scene light's resolution.
     std::optional<std::uint32_t> width;
@@ -47,6 +59,7 @@ struct BuildOptions {
     /// depend on it.
     std::optional<unsigned> threads;
     std::uint64_t seed = 1;
+    SamplerMethod sampler = SamplerMethod::scanline;
     int zlibLevel = 6;
     /// Called now and then with the fraction done, from the calling thread.
     std::function<void(double)> progress;
