@@ -24,7 +24,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <random>
 #include <string>
 #include <vector>
@@ -539,6 +541,47 @@ TEST(ExrErrors, OpenExrMessagesNameTheFileOnce) {
     }
     EXPECT_TRUE(hasOpenExrMagic((dir / "whole.exr").string()));
     EXPECT_FALSE(hasOpenExrMagic((dir / "missing.exr").string()));
+}
+
+/// True when `text` is valid UTF-8 without control characters.
+bool cleanUtf8(const std::string& text) {
+    for (std::size_t i = 0; i < text.size();) {
+        const unsigned char c = static_cast<unsigned char>(text[i]);
+        std::size_t n = c < 0x80 ? 1 : (c >> 5) == 6 ? 2 : (c >> 4) == 14 ? 3 : (c >> 3) == 30 ? 4 : 0;
+        if (n == 0 || i + n > text.size() || (n == 1 && c < 0x20)) return false;
+        for (std::size_t k = 1; k < n; ++k)
+            if ((static_cast<unsigned char>(text[i + k]) & 0xC0) != 0x80) return false;
+        i += n;
+    }
+    return true;
+}
+
+TEST(ExrErrors, DamagedHeaderBytesReachNoMessageRaw) {
+    test::TempDir dir;
+    TestPart p = deepPart("", "");
+    p.strings = {{"bad\xff\xfe", "text"}};
+    writeParts(dir / "damaged.exr", {p});
+    // Claim a size the file cannot hold for the attribute with the non-UTF-8 name.
+    std::string bytes;
+    {
+        std::ifstream in(dir / "damaged.exr", std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    const std::string key("bad\xff\xfe\0string\0", 13);
+    const std::size_t at = bytes.find(key);
+    ASSERT_NE(at, std::string::npos);
+    bytes.replace(at + key.size(), 4, std::string("\xff\xff\xff\x7f", 4));
+    std::ofstream(dir / "damaged.exr", std::ios::binary) << bytes;
+    try {
+        importDeepExr((dir / "damaged.exr").string(), (dir / "d.dsm").string(), withFov());
+        ADD_FAILURE() << "a damaged header was read";
+    } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_TRUE(cleanUtf8(what)) << what;
+        EXPECT_NE(what.find("header attribute 'bad\\xFF\\xFE' (string) claims 2147483647 bytes"), std::string::npos)
+            << what;
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / "d.dsm"));
 }
 
 }  // namespace
