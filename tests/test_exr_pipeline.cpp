@@ -410,7 +410,8 @@ TEST(ExrBounds, VolumetricImportRecordsItsTrueBound) {
 
 /// A 24 x 24 map of random functions; with `layered` every pixel has counts
 /// and a second layer.
-void writeMap(const std::filesystem::path& path, bool layered, int channels = 1) {
+void writeMap(const std::filesystem::path& path, bool layered, int channels = 1,
+              const std::string& metadata = R"({"test":"pipeline"})") {
     WriterOptions o;
     o.width = o.height = 24;
     o.tileSize = 8;
@@ -419,7 +420,7 @@ void writeMap(const std::filesystem::path& path, bool layered, int channels = 1)
     o.counts = layered;
     o.maxLayers = layered ? 3 : 1;
     o.camera.screenWindow = {-1.0, 1.0, -1.0, 1.0};
-    o.metadata = R"({"test":"pipeline"})";
+    o.metadata = metadata;
     MapWriter writer(path.string(), o);
     std::mt19937 rng(11);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
@@ -470,6 +471,19 @@ TEST(ExrBounds, RoundTripRecordsItsTrueBound) {
                 ir.errorBound, ir.tolerance);
     EXPECT_LE(worst, ir.errorBound - stated);
     EXPECT_GT(ir.errorBound, 2.0 * ir.tolerance);
+}
+
+TEST(ExrKept, WindowsNoImageCouldHaveAreNotGivenBack) {
+    test::TempDir dir;
+    // Edited metadata: a data window four billion pixels wide.
+    writeMap(dir / "map.dsm", false, 1,
+             R"({"exr":{"owner":"x","dataWindow":[-2000000000,0,2000000000,10],"displayWindow":[5,5,28,28]}})");
+    exportDeepExr((dir / "map.dsm").string(), (dir / "out.exr").string());
+    Imf::MultiPartInputFile back((dir / "out.exr").string().c_str());
+    const Imath::Box2i window(Imath::V2i(0, 0), Imath::V2i(23, 23));
+    EXPECT_EQ(back.header(0).dataWindow(), window);
+    EXPECT_EQ(back.header(0).displayWindow(), window);
+    EXPECT_EQ(back.header(0).typedAttribute<Imf::StringAttribute>("owner").value(), "x");
 }
 
 // ---------------------------------------------------------------------------

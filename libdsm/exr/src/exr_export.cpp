@@ -63,9 +63,15 @@ void imageWindows(const DeepShadowMap& map, unsigned level, const exr::KeptAttri
     display = data = Imath::Box2i(Imath::V2i(0, 0), Imath::V2i(width - 1, height - 1));
     if (level != 0 || !kept.displayWindow || !kept.dataWindow) return;
     const Imath::Box2i source = *kept.displayWindow;
-    if (source.max.x - source.min.x + 1 != width || source.max.y - source.min.y + 1 != height) return;
+    if (std::int64_t(source.max.x) - source.min.x + 1 != width || std::int64_t(source.max.y) - source.min.y + 1 != height)
+        return;
+    // A data window no image of ours could have (edited metadata) is not given back.
+    const Imath::Box2i keptData = *kept.dataWindow;
+    if (std::int64_t(keptData.max.x) - keptData.min.x >= std::int64_t(exr::kMaxExrExtent) ||
+        std::int64_t(keptData.max.y) - keptData.min.y >= std::int64_t(exr::kMaxExrExtent))
+        return;
     display = source;
-    Imath::Box2i grown = *kept.dataWindow;
+    Imath::Box2i grown = keptData;
     for (int y = 0; y < height; ++y)
         for (int x = 0; x < width; ++x) {
             const Imath::V2i at(display.min.x + x, display.min.y + y);
