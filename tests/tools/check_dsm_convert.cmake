@@ -6,7 +6,7 @@
 #         -DWORK_DIR=<fresh dir> -DVERSION=<project version> -P check_dsm_convert.cmake
 #
 # Checks: exrheader exrinfo flatten flatten_rgb roundtrip roundtrip_tiled deepen messy
-#         no_z stdin help version usage missing
+#         no_z stdin help version usage missing parts layered tiled_once magic kept opacity_channel
 cmake_minimum_required(VERSION 3.25)
 
 foreach(var CHECK DSM_CONVERT HELPER WORK_DIR VERSION)
@@ -160,7 +160,8 @@ elseif(CHECK STREQUAL "version")
   expect_contains(OUT "dsm-convert ${VERSION}")
 
 elseif(CHECK STREQUAL "usage")
-  foreach(args "a.dsm;b.png" "a.exr;b.exr" "a.dsm;b.exr;--tolerance;0.1" "a.exr;b.dsm;--tiled"
+  foreach(args "a.dsm;b.png" "a.dsm;b.exr;--fov;60" "a.dsm;b.exr;--tolerance;0.1" "a.exr;b.dsm;--channels;A"
+               "a.exr;b.dsm;--channels;Q=x" "a.dsm;b.exr;--part;1" "a.exr;b.dsm;--tiled"
                "a.exr;b.dsm;--fov;60;--ortho-width;2" "a.dsm" "a.dsm;b.exr;--max-deviation;-1" "a.exr;b.dsm;--fov;180")
     run(${args})
     expect_rc(2)
@@ -178,6 +179,97 @@ elseif(CHECK STREQUAL "missing")
   if(left)
     fail("failed conversions left files: ${left}")
   endif()
+
+elseif(CHECK STREQUAL "parts")
+  # A flat part first, then two deep views: the first deep part, with a note.
+  helper(make-parts "${WORK_DIR}/stereo.exr")
+  expect_rc(0)
+  run("${WORK_DIR}/stereo.exr" "${WORK_DIR}/left.dsm" --fov 60)
+  expect_rc(0)
+  expect_contains(OUT "part 1 'left' (view 'left')")
+  expect_contains(ERR "dsm-convert: note: read part 1 'left' (view 'left'); the file has other deep parts: part 2 'right' (view 'right') (choose one with --part or --view)")
+  foreach(select "--view;right" "--part;right" "--part;2")
+    run("${WORK_DIR}/stereo.exr" "${WORK_DIR}/right.dsm" --fov 60 ${select})
+    expect_rc(0)
+    expect_contains(OUT "part 2 'right' (view 'right')")
+    expect_empty(ERR)
+  endforeach()
+  run("${WORK_DIR}/stereo.exr" "${WORK_DIR}/beauty.dsm" --fov 60 --part 0)
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}/stereo.exr")
+  expect_contains(ERR "part 0 'beauty' is not a deep image")
+  if(EXISTS "${WORK_DIR}/beauty.dsm")
+    fail("a failed conversion left an output file")
+  endif()
+
+elseif(CHECK STREQUAL "layered")
+  helper(make-layered "${WORK_DIR}/layered.exr")
+  expect_rc(0)
+  run("${WORK_DIR}/layered.exr" "${WORK_DIR}/a.dsm" --fov 60)
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}/layered.exr")
+  expect_contains(ERR "channel A is ambiguous: rgba.A, spec.A (choose one with --channels A=NAME)")
+  run("${WORK_DIR}/layered.exr" "${WORK_DIR}/a.dsm" --fov 60 --channels A=rgba.A)
+  expect_rc(0)
+  expect_contains(OUT "(Z=depth.Z, A=rgba.A)")
+
+elseif(CHECK STREQUAL "tiled_once")
+  # EXR tiles smaller than, unaligned to and larger than the map's 32-pixel
+  # tile rows: each decoded once, every sample counted once.
+  foreach(tile 16 50 64 128)
+    helper(make-render "${WORK_DIR}/render.exr" 200 150 ${tile})
+    expect_rc(0)
+    helper(count-samples "${WORK_DIR}/render.exr")
+    expect_rc(0)
+    string(REGEX MATCH "[0-9]+ samples" truth "${OUT}")
+    run("${WORK_DIR}/render.exr" "${WORK_DIR}/render.dsm" --fov 60 -m 1)
+    expect_rc(0)
+    expect_contains(OUT ", ${truth} -> ")
+    string(REGEX MATCH "([0-9]+) EXR tiles, ([0-9]+) decodes" counts "${OUT}")
+    if(NOT counts OR NOT CMAKE_MATCH_1 EQUAL CMAKE_MATCH_2)
+      fail("${tile}-pixel tiles: expected each tile decoded once in:\n${OUT}")
+    endif()
+    message(STATUS "${tile}-pixel EXR tiles: ${counts}, ${truth}")
+  endforeach()
+
+elseif(CHECK STREQUAL "magic")
+  # The input's kind by its first bytes, not its name.
+  helper(make-render "${WORK_DIR}/render.exr" 40 30)
+  expect_rc(0)
+  file(COPY_FILE "${WORK_DIR}/render.exr" "${WORK_DIR}/render.deep")
+  run("${WORK_DIR}/render.deep" "${WORK_DIR}/render.dsm" --fov 60)
+  expect_rc(0)
+  run("${WORK_DIR}/render.exr" "${WORK_DIR}/copy.exr")
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}/render.exr")
+  expect_contains(ERR "an OpenEXR image converts to a .dsm map")
+  run("${WORK_DIR}/render.exr" "${WORK_DIR}/x.dsm")
+  expect_rc(1)
+  expect_one_error_line("${WORK_DIR}/render.exr")
+  expect_contains(ERR "give one with --fov DEG, --ortho-width W or --camera-from MAP.dsm")
+
+elseif(CHECK STREQUAL "kept")
+  # Header attributes and the data window survive .exr -> .dsm -> .exr.
+  helper(make-render "${WORK_DIR}/render.exr" 40 30)
+  expect_rc(0)
+  run("${WORK_DIR}/render.exr" "${WORK_DIR}/render.dsm" --fov 60)
+  expect_rc(0)
+  run("${WORK_DIR}/render.dsm" "${WORK_DIR}/again.exr")
+  expect_rc(0)
+  third_party("${EXRHEADER}" "${WORK_DIR}/again.exr")
+  expect_rc(0)
+  expect_contains(OUT "owner (type string): \"lighting\"")
+  expect_contains(OUT "view (type string): \"left\"")
+  expect_contains(OUT "name (type string): \"beauty\"")
+
+elseif(CHECK STREQUAL "opacity_channel")
+  # dsm-info --opacity names a monochrome opacity A, as a flattened deep image does.
+  export_map(mono)
+  run_tool("${DSM_INFO}" dsm-info "${MAP}" --opacity -o "${WORK_DIR}/opacity.exr")
+  expect_rc(0)
+  helper(flat-alpha "${MAP}" "${WORK_DIR}/opacity.exr")
+  message(STATUS "${OUT}")
+  expect_rc(0)
 
 else()
   message(FATAL_ERROR "unknown CHECK '${CHECK}'")

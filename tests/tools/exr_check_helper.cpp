@@ -11,6 +11,12 @@
 //   exr_check_helper make-messy OUT.exr               unsorted, overlapping deep samples
 //   exr_check_helper check-messy MAP.dsm              against the hand-computed tidy answer
 //   exr_check_helper make-no-z OUT.exr                a deep image without a Z channel
+//   exr_check_helper make-render OUT.exr W H [TILE]   a sparse camera render: RGBA half + Z float, 0 to 2
+//                                                     samples a pixel, name/view/owner, no camera; deep tiled
+//                                                     with TILE-pixel tiles when given
+//   exr_check_helper make-parts OUT.exr               a flat part 'beauty', deep parts 'left' and 'right' (views)
+//   exr_check_helper make-layered OUT.exr             deep channels depth.Z, rgba.A and spec.A
+//   exr_check_helper count-samples IN.exr             prints "N samples" of the first deep part, read once
 #include <dsm/dsm.h>
 
 #include <ImathBox.h>
@@ -21,10 +27,20 @@
 #include <ImfHeader.h>
 #include <ImfInputFile.h>
 #include <ImfOutputFile.h>
+#include <ImfDeepScanLineInputPart.h>
+#include <ImfDeepScanLineOutputPart.h>
+#include <ImfDeepTiledInputPart.h>
+#include <ImfDeepTiledOutputFile.h>
+#include <ImfMultiPartInputFile.h>
+#include <ImfMultiPartOutputFile.h>
+#include <ImfOutputPart.h>
 #include <ImfPartType.h>
+#include <ImfStandardAttributes.h>
+#include <ImfStringAttribute.h>
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
 #include <cstdio>
 #include <exception>
 #include <random>
@@ -236,6 +252,153 @@ int checkMessy(const std::string& mapPath) {
     return worst <= bound ? 0 : 1;
 }
 
+/// A sparse deep render as a camera writes it: RGBA half and Z float, about
+/// a third of the pixels empty and the rest one or two point samples.
+int makeRender(const std::string& path, int width, int height, int tile) {
+    Imf::Header header(width, height);
+    header.compression() = Imf::ZIPS_COMPRESSION;
+    for (const char* name : {"R", "G", "B", "A"}) header.channels().insert(name, Imf::Channel(Imf::HALF));
+    header.channels().insert("Z", Imf::Channel(Imf::FLOAT));
+    header.insert("name", Imf::StringAttribute("beauty"));
+    header.insert("view", Imf::StringAttribute("left"));
+    header.insert("owner", Imf::StringAttribute("lighting"));
+    struct Sample {
+        half r, g, b, a;
+        float z;
+    };
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    const std::size_t n = std::size_t(width) * std::size_t(height);
+    std::vector<unsigned> counts(n);
+    std::vector<std::vector<Sample>> samples(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const unsigned k = unsigned(rng() % 3);
+        float z = 1.0f + 10.0f * unit(rng);
+        for (unsigned j = 0; j < k; ++j, z += 0.5f + unit(rng)) {
+            const half a(0.1f + 0.9f * unit(rng));
+            samples[i].push_back({a, a, a, a, z});
+        }
+        counts[i] = k;
+    }
+    std::vector<char*> pointers[5];
+    for (auto& p : pointers) p.assign(n, nullptr);
+    for (std::size_t i = 0; i < n; ++i) {
+        char* base = reinterpret_cast<char*>(samples[i].data());
+        if (!base) continue;
+        pointers[0][i] = base + offsetof(Sample, r), pointers[1][i] = base + offsetof(Sample, g);
+        pointers[2][i] = base + offsetof(Sample, b), pointers[3][i] = base + offsetof(Sample, a);
+        pointers[4][i] = base + offsetof(Sample, z);
+    }
+    Imf::DeepFrameBuffer fb;
+    const std::size_t ys = sizeof(char*) * std::size_t(width);
+    fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data()), sizeof(unsigned),
+                                         sizeof(unsigned) * std::size_t(width)));
+    const char* names[] = {"R", "G", "B", "A", "Z"};
+    for (int c = 0; c < 5; ++c)
+        fb.insert(names[c], Imf::DeepSlice(c == 4 ? Imf::FLOAT : Imf::HALF,
+                                           reinterpret_cast<char*>(pointers[c].data()), sizeof(char*), ys,
+                                           sizeof(Sample)));
+    if (tile > 0) {
+        header.setTileDescription(Imf::TileDescription(unsigned(tile), unsigned(tile), Imf::ONE_LEVEL));
+        header.setType(Imf::DEEPTILE);
+        Imf::DeepTiledOutputFile out(path.c_str(), header);
+        out.setFrameBuffer(fb);
+        out.writeTiles(0, out.numXTiles(0) - 1, 0, out.numYTiles(0) - 1);
+    } else {
+        header.setType(Imf::DEEPSCANLINE);
+        Imf::DeepScanLineOutputFile out(path.c_str(), header);
+        out.setFrameBuffer(fb);
+        out.writePixels(height);
+    }
+    return 0;
+}
+
+/// One point sample of alpha 0.5 at depth 2 in every pixel of a 16 x 8
+/// deep part, its channels named `z` and `alpha` (and `more`, filled alike).
+void writeDeepPart(Imf::MultiPartOutputFile& file, int part) {
+    const Imf::Header& h = file.header(part);
+    std::vector<std::string> names;
+    for (auto it = h.channels().begin(); it != h.channels().end(); ++it) names.push_back(it.name());
+    const int width = 16, height = 8;
+    std::vector<float> values(names.size());
+    for (std::size_t c = 0; c < names.size(); ++c) values[c] = names[c].back() == 'Z' ? 2.0f : 0.5f;
+    std::vector<unsigned> counts(std::size_t(width * height), 1);
+    std::vector<std::vector<char*>> pointers(names.size());
+    Imf::DeepFrameBuffer fb;
+    fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data()), sizeof(unsigned),
+                                         sizeof(unsigned) * width));
+    for (std::size_t c = 0; c < names.size(); ++c) {
+        pointers[c].assign(counts.size(), reinterpret_cast<char*>(&values[c]));
+        fb.insert(names[c], Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(pointers[c].data()), sizeof(char*),
+                                           sizeof(char*) * width, sizeof(float)));
+    }
+    Imf::DeepScanLineOutputPart out(file, part);
+    out.setFrameBuffer(fb);
+    out.writePixels(height);
+}
+
+Imf::Header deepHeader(const std::string& name, const std::string& view, const std::vector<const char*>& channels) {
+    Imf::Header h(16, 8);
+    h.compression() = Imf::ZIPS_COMPRESSION;
+    h.setType(Imf::DEEPSCANLINE);
+    if (!name.empty()) h.setName(name);
+    if (!view.empty()) h.setView(view);
+    for (const char* c : channels) h.channels().insert(c, Imf::Channel(Imf::FLOAT));
+    return h;
+}
+
+int makeParts(const std::string& path) {
+    Imf::Header flat(16, 8);
+    flat.setName("beauty");
+    flat.setType(Imf::SCANLINEIMAGE);
+    flat.channels().insert("R", Imf::Channel(Imf::FLOAT));
+    const Imf::Header headers[] = {flat, deepHeader("left", "left", {"Z", "A"}), deepHeader("right", "right", {"Z", "A"})};
+    Imf::MultiPartOutputFile file(path.c_str(), headers, 3);
+    std::vector<float> r(16 * 8, 0.5f);
+    Imf::FrameBuffer fb;
+    fb.insert("R", Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(r.data()), sizeof(float), sizeof(float) * 16));
+    Imf::OutputPart beauty(file, 0);
+    beauty.setFrameBuffer(fb);
+    beauty.writePixels(8);
+    writeDeepPart(file, 1);
+    writeDeepPart(file, 2);
+    return 0;
+}
+
+int makeLayered(const std::string& path) {
+    const Imf::Header headers[] = {deepHeader("", "", {"depth.Z", "rgba.A", "spec.A"})};
+    Imf::MultiPartOutputFile file(path.c_str(), headers, 1);
+    writeDeepPart(file, 0);
+    return 0;
+}
+
+int countSamples(const std::string& path) {
+    Imf::MultiPartInputFile file(path.c_str());
+    int part = 0;
+    while (part < file.parts() && !Imf::isDeepData(file.header(part).type())) ++part;
+    const Imf::Header& h = file.header(part);
+    const Imath::Box2i dw = h.dataWindow();
+    const int width = dw.max.x - dw.min.x + 1, height = dw.max.y - dw.min.y + 1;
+    std::vector<unsigned> counts(std::size_t(width) * std::size_t(height));
+    Imf::DeepFrameBuffer fb;
+    fb.insertSampleCountSlice(Imf::Slice(Imf::UINT,
+                                         reinterpret_cast<char*>(counts.data() - (dw.min.x + std::ptrdiff_t(dw.min.y) * width)),
+                                         sizeof(unsigned), sizeof(unsigned) * std::size_t(width)));
+    if (h.type() == Imf::DEEPTILE) {
+        Imf::DeepTiledInputPart in(file, part);
+        in.setFrameBuffer(fb);
+        in.readPixelSampleCounts(0, in.numXTiles(0) - 1, 0, in.numYTiles(0) - 1);
+    } else {
+        Imf::DeepScanLineInputPart in(file, part);
+        in.setFrameBuffer(fb);
+        in.readPixelSampleCounts(dw.min.y, dw.max.y);
+    }
+    unsigned long long total = 0;
+    for (unsigned c : counts) total += c;
+    std::printf("%llu samples\n", total);
+    return 0;
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -249,6 +412,11 @@ int main(int argc, char** argv) {
         if (a.size() == 2 && a[0] == "make-messy") return makeMessy(a[1]);
         if (a.size() == 2 && a[0] == "check-messy") return checkMessy(a[1]);
         if (a.size() == 2 && a[0] == "make-no-z") return makeMessy(a[1], false);
+        if (a.size() == 2 && a[0] == "make-parts") return makeParts(a[1]);
+        if (a.size() == 2 && a[0] == "make-layered") return makeLayered(a[1]);
+        if (a.size() == 2 && a[0] == "count-samples") return countSamples(a[1]);
+        if ((a.size() == 4 || a.size() == 5) && a[0] == "make-render")
+            return makeRender(a[1], std::stoi(a[2]), std::stoi(a[3]), a.size() == 5 ? std::stoi(a[4]) : 0);
         std::fprintf(stderr, "exr_check_helper: bad arguments (see the head of exr_check_helper.cpp)\n");
         return 2;
     } catch (const std::exception& e) {

@@ -112,7 +112,7 @@ std::vector<std::uint8_t> quantise8(const std::vector<float>& values) {
 
 bool imageFormatKeepsFloats(const std::string& path) { return keepsFloats(*outputFor(path)); }
 
-void writeImage(const std::string& path, const FloatImage& image) {
+void writeImage(const std::string& path, const FloatImage& image, const std::vector<std::string>& names) {
     if (image.width == 0 || image.height == 0)
         throw Error(ErrorCode::argument,
                     concat(where(path), ": cannot write an empty image (", image.width, " x ", image.height, ")"));
@@ -127,8 +127,12 @@ void writeImage(const std::string& path, const FloatImage& image) {
     const bool floats = keepsFloats(*out);
     const OIIO::TypeDesc type = floats ? OIIO::TypeDesc::FLOAT : OIIO::TypeDesc::UINT8;
     OIIO::ImageSpec spec(static_cast<int>(image.width), static_cast<int>(image.height), image.channels, type);
-    spec.channelnames = channelNames(image.channels);
-    spec.alpha_channel = image.channels == 2 || image.channels == 4 ? image.channels - 1 : -1;
+    if (!names.empty() && names.size() != static_cast<std::size_t>(image.channels))
+        throw Error(ErrorCode::argument, concat(where(path), ": ", names.size(), " channel names for ", image.channels,
+                                                " channels"));
+    spec.channelnames = names.empty() ? channelNames(image.channels) : names;
+    spec.alpha_channel = names.empty() && (image.channels == 2 || image.channels == 4) ? image.channels - 1 : -1;
+    if (names.size() == 1 && names[0] == "A") spec.alpha_channel = 0;
     spec.attribute("Software", "libdsm");
     // The values are stored as they are, not through the sRGB curve: say so
     // (a PNG gets a gAMA chunk of 1.0).

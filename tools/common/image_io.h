@@ -3,6 +3,8 @@
 #pragma once
 
 #include <string>
+#include <vector>
+#include <vector>
 
 #include "dsm/map_images.h"
 
@@ -19,8 +21,9 @@ bool imageFormatKeepsFloats(const std::string& path);
 /// a linear quantisation, no sRGB transfer curve. The picture is written to a
 /// temporary file beside `path` and renamed over it, so `path` is never left
 /// half written. Throws dsm::Error naming the file when the format is unknown,
-/// the image is empty or malformed, or the file cannot be written.
-void writeImage(const std::string& path, const FloatImage& image);
+/// the image is empty or malformed, or the file cannot be written. `names`
+/// names the channels (default Y; Y, A; R, G, B; R, G, B, A).
+void writeImage(const std::string& path, const FloatImage& image, const std::vector<std::string>& names = {});
 
 /// Reads a whole picture (the first subimage, level 0) as floats: 8- and
 /// 16-bit integer channels become value / 255 (or / 65535). Throws dsm::Error

@@ -1,5 +1,6 @@
 // dsm-convert: deep shadow maps to deep OpenEXR images and back; the
-// direction follows OUT's extension. Documentation: docs/dsm-convert.md; the
+// direction follows OUT's extension, and IN must be of the other kind (by its
+// magic number, whatever its name). Documentation: docs/dsm-convert.md; the
 // mapping and its error bounds: spec/exr-interop.md.
 //
 // Uses only libdsm's public API.
@@ -28,6 +29,7 @@ constexpr double kMaxLength = 1e30;
 
 enum class Kind { Map, Exr, Unknown };
 
+/// The kind OUT's extension asks for.
 Kind kindOf(const std::string& path) {
     std::string ext = std::filesystem::path(path).extension().string();
     for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
@@ -44,8 +46,8 @@ int main(int argc, char** argv) {
                  "the extension of OUT.",
                  kToolName};
     std::string input, output;
-    app.add_option("IN", input, "Input .dsm or deep .exr; - reads standard input (the kind is then the opposite "
-                                "of OUT's)")
+    app.add_option("IN", input, "Input map or deep OpenEXR image, told apart by its first bytes; - reads "
+                                "standard input")
         ->required()
         ->type_name("");
     app.add_option("OUT", output, "Output .exr or .dsm (written atomically)")->required()->type_name("");
@@ -82,6 +84,26 @@ int main(int argc, char** argv) {
                                   "in [1e-6, 1] (default clamp(tolerance/4, 1e-5, 1e-3))")
                        ->type_name("D")
                        ->check(finiteNumberIn(dsm::kMinExrErrorBound, 1.0));
+    std::string part, view, channelMapping;
+    auto* partOption = app.add_option("--part", part, ".exr -> .dsm: the part to read, by index or name (default: "
+                                                      "the first deep part)")
+                           ->type_name("NAME|INDEX");
+    auto* viewOption = app.add_option("--view", view, ".exr -> .dsm: the deep part of this view")->type_name("NAME");
+    auto* channelsOption =
+        app.add_option("--channels", channelMapping,
+                       ".exr -> .dsm: channels for Z, ZBack, A, AR, AG, AB, as Z=depth.Z,A=rgba.A (default: the "
+                       "channel of that name, else the one named LAYER.ROLE)")
+            ->type_name("ROLE=NAME,...")
+            ->check(CLI::Validator(
+                [](std::string& text) {
+                    try {
+                        (void)dsm::parseExrChannelMapping(text);
+                    } catch (const dsm::Error& e) {
+                        return std::string(e.what());
+                    }
+                    return std::string();
+                },
+                "ROLE=NAME,...", "channel mapping"));
     std::string cameraFrom;
     auto* cameraMap = app.add_option("--camera-from", cameraFrom, ".exr -> .dsm: take the light camera of this map")
                           ->type_name("MAP.dsm");
@@ -123,11 +145,9 @@ int main(int argc, char** argv) {
         to = kindOf(output);
         if (to == Kind::Unknown) throw CLI::ValidationError("OUT", "'" + output + "' must end in .dsm or .exr");
         from = to == Kind::Map ? Kind::Exr : Kind::Map;
-        if (input != "-" && kindOf(input) != from)
-            throw CLI::ValidationError("IN", "'" + input + "' must end in " + (from == Kind::Map ? ".dsm" : ".exr") +
-                                                 " to make " + output);
         const auto& exportOnly = {level, tiled, exrTile, deviation};
-        const auto& importOnly = {tolerance, linear, cameraMap, fov, ortho, mapTile, mips};
+        const auto& importOnly = {tolerance, linear, cameraMap, fov, ortho, mapTile, mips, partOption, viewOption,
+                                  channelsOption};
         for (CLI::Option* o : to == Kind::Exr ? importOnly : exportOnly)
             if (o->count())
                 throw CLI::ValidationError(o->get_name(), std::string("applies only to ") +
@@ -143,6 +163,9 @@ int main(int argc, char** argv) {
     if (fov->count()) importOptions.fieldOfView = fieldOfView;
     if (ortho->count()) importOptions.orthoWidth = orthoWidth;
     if (mips->count() && mipLevels != 0) importOptions.mipLevels = mipLevels;  // 0: the full pyramid
+    importOptions.part = part;
+    importOptions.view = view;
+    if (channelsOption->count()) importOptions.channels = dsm::parseExrChannelMapping(channelMapping);
 
     // What the failed step was working on, for errors that name no file.
     std::string current = input == "-" ? "<stdin>" : input;
@@ -153,6 +176,13 @@ int main(int argc, char** argv) {
                                                               : std::vector<std::string>{input, cameraFrom});
         dsm::tools::InputFile in(input);
         dsm::tools::addDisplayName(displayNames, in);
+        // The input's kind by its magic number, not its name.
+        if (const bool exr = dsm::hasOpenExrMagic(in.path()); exr != (from == Kind::Exr))
+            throw dsm::Error(dsm::ErrorCode::format,
+                             "'" + in.name() + "': " +
+                                 (exr ? "an OpenEXR image converts to a .dsm map, not to '" + output + "'"
+                                      : "not an OpenEXR file (to make '" + output + "' from a map, give an .exr OUT)"),
+                             in.name());
         if (to == Kind::Exr) {
             const dsm::ExrExportReport r = dsm::exportDeepExr(in.path(), output, exportOptions);
             if (!quiet)
@@ -161,6 +191,9 @@ int main(int argc, char** argv) {
                             kToolName, output.c_str(), r.width, r.height, r.channels == 1 ? "mono" : "RGB",
                             static_cast<unsigned long long>(r.pointSamples),
                             static_cast<unsigned long long>(r.volumeSamples), r.largestDeviation, r.maxDeviation);
+            if (!quiet && r.vertexSamples)
+                std::printf("  and %llu vertex samples (every layer and count, for a lossless import)\n",
+                            static_cast<unsigned long long>(r.vertices));
             if (!quiet && r.oneStepExcess)
                 std::printf("  %llu volume samples one float step long exceed the bound between adjacent float "
                             "depths (segments too steep to cut finer)\n",
@@ -173,11 +206,24 @@ int main(int argc, char** argv) {
             }
             const dsm::ExrImportReport r = dsm::importDeepExr(in.path(), output, importOptions);
             if (!quiet)
-                std::printf("%s: wrote '%s': %u x %u, %s, %llu samples -> %llu vertices, tolerance %.3g, camera "
-                            "from %s\n",
+                for (const std::string& note : r.notes) std::fprintf(stderr, "%s: note: %s\n", kToolName, note.c_str());
+            if (!quiet) {
+                const auto count = [](std::uint64_t n) { return static_cast<unsigned long long>(n); };
+                std::printf("%s: wrote '%s': %u x %u, %s, %s (%s), %llu samples -> %llu vertices%s, tolerance %.3g, "
+                            "error bound %.3g, camera from %s\n",
                             kToolName, output.c_str(), r.width, r.height, r.channels == 1 ? "mono" : "RGB",
-                            static_cast<unsigned long long>(r.samples), static_cast<unsigned long long>(r.vertices),
-                            r.tolerance, r.cameraSource.c_str());
+                            r.part.c_str(), r.channelNames.c_str(), count(r.samples), count(r.vertices),
+                            r.fromVertexSamples ? " (from vertex samples, as they are)" : "", r.tolerance,
+                            r.errorBound, r.cameraSource.c_str());
+                if (r.mergedSamples)
+                    std::printf("  %llu samples at the depths of another sample of their pixel were combined with "
+                                "it\n",
+                                count(r.mergedSamples));
+                if (r.droppedSamples)
+                    std::printf("  %llu samples outside the display window were left out\n", count(r.droppedSamples));
+                if (r.tiled)
+                    std::printf("  %llu EXR tiles, %llu decodes\n", count(r.exrChunks), count(r.exrDecodes));
+            }
         }
     } catch (const std::exception& e) {
         // libdsm's errors name the file they concern: the input, the output or the --camera-from map.

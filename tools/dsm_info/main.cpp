@@ -622,7 +622,10 @@ int writePicture(const Options& o) {
         },
         displayNames);
     if (!computed) return tools::kExitFailure;
-    if (!guarded(o.output, [&] { dsm::writeImage(o.output, image); })) return tools::kExitFailure;
+    // A monochrome opacity is an alpha: named A, as a flattened deep image names it.
+    const std::vector<std::string> names =
+        o.picture == Picture::Opacity && image.channels == 1 ? std::vector<std::string>{"A"} : std::vector<std::string>{};
+    if (!guarded(o.output, [&] { dsm::writeImage(o.output, image, names); })) return tools::kExitFailure;
     std::cout << o.output << ": level " << level << " of " << name << ", " << image.width << " x " << image.height
               << ", " << plural(static_cast<std::uint64_t>(image.channels), "channel", "channels") << ", "
               << (keepsFloats ? "32-bit float" : "8-bit") << note << '\n';

@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <span>
 #include <string>
@@ -115,18 +116,34 @@ struct ExrExportReport {
     /// float depths. The excess lies strictly between two adjacent float
     /// depths, where no float query can see it.
     std::uint64_t oneStepExcess = 0;
+    /// The map has counts or layers: its exact vertices are also written, as
+    /// vertex samples (alpha 0, dsm.* channels; spec/exr-interop.md).
+    bool vertexSamples = false;
+    /// Vertex samples written.
+    std::uint64_t vertices = 0;
 };
 
 /// Writes level `options.level` of a map as a deep EXR (ZIPS, float channels
 /// Z, ZBack, A and for RGB maps also AR, AG, AB, R, G, B with R = AR etc.), the
 /// standard worldToCamera / worldToNDC / screenWindow attributes and the
-/// exact dsm:* attributes (spec/exr-interop.md). Written to a temporary file
+/// exact dsm:* attributes (spec/exr-interop.md). A map with counts or layers
+/// also gets vertex samples. The header attributes and windows an imported
+/// map kept in its metadata ("exr") are given back. Written to a temporary file
 /// beside `exrPath` and renamed into place: on failure no file is left.
 /// Throws dsm::Error naming the file, level or pixel.
 DSM_API ExrExportReport exportDeepExr(const std::string& dsmPath, const std::string& exrPath,
                               const ExrExportOptions& options = {});
 
 struct ExrImportOptions {
+    /// The part to read: its index ("0", "1", ...) or its name. Empty: the
+    /// first deep part of `view`, or the first deep part.
+    std::string part;
+    /// The view to read: the deep part whose `view` attribute is this.
+    std::string view;
+    /// The channel for a role (Z, ZBack, A, AR, AG, AB). A role not mapped is
+    /// the channel of that name, else the one channel whose last component
+    /// (after the last '.') is the role, as in "depth.Z" (parseExrChannelMapping()).
+    std::map<std::string, std::string> channels;
     /// Compression tolerance, finite and >= 0. Unset (automatic) uses the
     /// file's dsm:tolerance when present, else kDefaultExrImportTolerance.
     std::optional<double> tolerance;
@@ -165,16 +182,58 @@ struct ExrImportReport {
     /// "option", "field of view", "orthographic width", "dsm attributes" or
     /// "standard attributes".
     std::string cameraSource;
+    /// The part read ("part 1 'deep' (view 'left')") and its channels
+    /// ("Z=depth.Z, A=rgba.A").
+    std::string part;
+    std::string channelNames;
+    /// What a caller should know: the other deep parts not read.
+    std::vector<std::string> notes;
+    /// Samples of the display window read into the map.
     std::uint64_t samples = 0;
+    /// Of those, samples at the depth (Z and ZBack) of another sample of the
+    /// same pixel: combined with it (OpenEXR's merge rule), not lost.
+    std::uint64_t mergedSamples = 0;
+    /// Samples of the data window outside the display window: not in the map.
+    std::uint64_t droppedSamples = 0;
     std::uint64_t vertices = 0;
+    /// The image carried vertex samples: the map's vertices were read as
+    /// they are (no linearisation, no compression).
+    bool fromVertexSamples = false;
+    /// Chunks (scanline blocks or tiles) of the image and decodes made: each
+    /// chunk is decoded once.
+    std::uint64_t exrChunks = 0;
+    std::uint64_t exrDecodes = 0;
+    bool tiled = false;
+    /// What the source image states as its own error (its dsm:errorBound plus
+    /// dsm:maxDeviation; 0 for other images), and the error bound recorded
+    /// for level 0: tolerance + maxLinearError + sourceErrorBound (only the
+    /// source's for vertex samples).
+    double sourceErrorBound = 0.0;
+    double errorBound = 0.0;
 };
 
-/// Reads a deep EXR (scanline or tiled, part 0) rendered from a light and
-/// writes a map of its display window: per pixel visibilityFromDeepSamples()
-/// then the compressor, mip-mapped by MapWriter. Monochrome from A, or RGB
-/// when AR, AG and AB are all present. Pixels outside the data window are
-/// empty. Throws dsm::Error naming the file (and pixel) when it is not a deep
-/// EXR, has no Z or alpha channel, holds invalid samples, or has no camera.
+/// The channel mapping "ROLE=CHANNEL[,ROLE=CHANNEL...]" with roles Z, ZBack,
+/// A, AR, AG, AB (ExrImportOptions::channels). Throws dsm::Error
+/// (ErrorCode::argument) naming the item that is not one.
+DSM_API std::map<std::string, std::string> parseExrChannelMapping(const std::string& text);
+
+/// True when the file at `path` starts with OpenEXR's magic number (whatever
+/// its name); false when it does not or cannot be read.
+DSM_API bool hasOpenExrMagic(const std::string& path);
+
+/// Reads a deep EXR part (scanline or tiled; options.part / view, else the
+/// first deep part) rendered from a light and writes a map of its display
+/// window: per pixel visibilityFromDeepSamples() then the compressor,
+/// mip-mapped by MapWriter, or the vertex samples as they are. Monochrome
+/// from A, or RGB when AR, AG and AB are all present (options.channels).
+/// Pixels outside the data window are empty; samples outside the display
+/// window are counted, not read. Level 0 records as its tolerance the whole
+/// error bound against the image's transmittance (and what the image states
+/// of its own source): tolerance + maxLinearError + sourceErrorBound. The
+/// image's string attributes and windows go into the metadata under "exr".
+/// Throws dsm::Error naming the file (and pixel) when it is not a deep EXR,
+/// has no such part, no Z or alpha channel, holds invalid samples, or has no
+/// camera.
 DSM_API ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsmPath,
                               const ExrImportOptions& options = {});
 
