@@ -15,10 +15,42 @@ namespace {
 // float spacing just below 1.
 constexpr double kStoreRounding = 0x1p-25;
 
+// pushValid() checks its input only in debug builds.
+#ifdef NDEBUG
+constexpr bool kTrustValidInput = true;
+#else
+constexpr bool kTrustValidInput = false;
+#endif
+
+// A range of slopes lo <= m <= hi of lines from a segment origin, each bound a
+// numerator over a positive denominator (a depth difference), so that a new
+// bound is compared by cross products instead of divisions.
+struct SlopeWindow {
+    double loNum, loDen, hiNum, hiDen;
+
+    static SlopeWindow of(double bottom, double top, double dz) { return {bottom, dz, top, dz}; }
+    // Intersects with [bottom / dz, top / dz]; dz > 0.
+    void narrow(double bottom, double top, double dz) {
+        if (top * hiDen < hiNum * dz) {
+            hiNum = top;
+            hiDen = dz;
+        }
+        if (bottom * loDen > loNum * dz) {
+            loNum = bottom;
+            loDen = dz;
+        }
+    }
+    bool empty() const { return loNum * hiDen > hiNum * loDen; }
+    double lo() const { return loNum / loDen; }
+    double hi() const { return hiNum / hiDen; }
+};
+
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
-// all channels at once, writing straight into `out`. The segment origin is the
-// last stored vertex (exact float values), or a "virtual" origin at V = 1 while
-// the layer has stored nothing (V = 1 is implicit before the first vertex).
+// writing straight into `out`. The segment origin is the last stored vertex
+// (exact float values), or a "virtual" origin at V = 1 while the layer has
+// stored nothing (V = 1 is implicit before the first vertex). The channel
+// count (1 or 3) is a template argument of the per-vertex work, and a
+// 1-channel builder can be widened to 3 mid-stream (see widen()).
 class Greedy {
 public:
     Greedy(int channels, double tolerance, bool keepCounts)
@@ -28,58 +60,76 @@ public:
           window_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
           out_(channels, keepCounts) {}
 
-    void push(float z, const double* v, std::uint64_t count) {
+    int channels() const { return channels_; }
+    // The half-width of the target windows for exact input.
+    double window() const { return window_; }
+
+    // One input vertex with target windows v[c] +- band (0 <= band <= window()).
+    template <int C>
+    void push(float z, const double* v, std::uint64_t count, double band) {
         if (!started_) {
             started_ = true;
             originZ_ = z;
-            std::fill(originV_, originV_ + channels_, 1.0);
+            std::fill(originV_, originV_ + C, 1.0);
             originStored_ = false;
             originIsStep_ = false;
         }
-        if (!open_ && z == originZ_) {
-            absorbAtOrigin(v, count);
-            return;
-        }
-        if (open_ && !fitsWindow(z, v)) {
-            closeSegment();
+        if (open_ && !extend<C>(z, v, band)) closeSegment<C>();
+        if (!open_) {
             if (z == originZ_) {
-                absorbAtOrigin(v, count);
+                absorbAtOrigin<C>(v, count, band);
                 return;
             }
-        }
-        if (!open_) {
-            // The first window after an origin is always reachable: the origin is
-            // within tolerance of the input there and the input never increases.
-            // Rounding of the origin may leave a lower bound a hair above 0;
-            // a flat segment then stays within tolerance.
-            open_ = true;
-            for (int c = 0; c < channels_; ++c) {
-                double lo, hi;
-                windowSlopes(z, v[c], c, lo, hi);
-                hi_[c] = std::min(hi, 0.0);
-                lo_[c] = std::min(lo, hi_[c]);
-                rawSlopes(z, v[c], c, rawLo_[c], rawHi_[c]);
-            }
-        } else {
-            for (int c = 0; c < channels_; ++c) {
-                double lo, hi;
-                windowSlopes(z, v[c], c, lo, hi);
-                lo_[c] = std::max(lo_[c], lo);
-                hi_[c] = std::min(hi_[c], hi);
-                rawSlopes(z, v[c], c, lo, hi);
-                rawLo_[c] = std::max(rawLo_[c], lo);
-                rawHi_[c] = std::min(rawHi_[c], hi);
-            }
+            open<C>(z, v, band);
         }
         lastZ_ = z;
         segmentCount_ += count;
+    }
+
+    // Accepts the leading vertices of a run that leave every window of the
+    // open segment as it is (the common case inside a long segment), without
+    // the per-vertex bookkeeping: the tests are independent across a block of
+    // vertices, so the compiler can vectorize them. Returns how many it took
+    // (0 when no segment is open).
+    template <int C, typename T>
+    std::size_t skipUnchanged(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+        if (!open_) return 0;
+        constexpr std::size_t kBlock = 8;
+        std::size_t taken = 0;
+        while (n - taken >= kBlock) {
+            bool unchanged[kBlock];
+            for (std::size_t j = 0; j < kBlock; ++j) {
+                const double dz = static_cast<double>(z[taken + j]) - originZ_;
+                bool keep = true;
+                for (int c = 0; c < C; ++c) {
+                    const double value = static_cast<double>(v[(taken + j) * C + static_cast<std::size_t>(c)]);
+                    const double top = std::min(value + band, 1.0) - originV_[c];
+                    const double bottom = std::max(value - band, 0.0) - originV_[c];
+                    const double rawTop = value + band - originV_[c];
+                    const double rawBottom = value - band - originV_[c];
+                    const SlopeWindow& w = feasible_[c];
+                    const SlopeWindow& r = raw_[c];
+                    keep &= (top * w.hiDen >= w.hiNum * dz) & (bottom * w.loDen <= w.loNum * dz) &
+                            (rawTop * r.hiDen >= r.hiNum * dz) & (rawBottom * r.loDen <= r.loNum * dz);
+                }
+                unchanged[j] = keep;
+            }
+            std::size_t j = 0;
+            while (j < kBlock && unchanged[j]) ++j;
+            if (counts)
+                for (std::size_t k = 0; k < j; ++k) segmentCount_ += counts[taken + k];
+            taken += j;
+            if (j < kBlock) break;
+        }
+        if (taken > 0) lastZ_ = z[taken - 1];
+        return taken;
     }
 
     // Ends the current layer: closes the open segment and makes sure the layer
     // stores at least one vertex when it must (its end depth, or counts).
     void finishLayer(bool recordEnd) {
         if (!started_) return;
-        if (open_) closeSegment();
+        if (open_) channels_ == 1 ? closeSegment<1>() : closeSegment<3>();
         if (!originStored_ && (recordEnd || originCount_ > 0)) storeOrigin();
         started_ = false;
     }
@@ -88,35 +138,73 @@ public:
         if (!out_.empty()) out_.beginLayer();
     }
 
-    VisibilityFunction take() {
+    // Turns a 1-channel builder into a 3-channel one with every channel equal
+    // to the single one so far: its output is replicated and its open windows
+    // become each channel's windows. Valid for three input channels that the
+    // single channel's targets kept within every channel's tolerance.
+    void widen() {
+        VisibilityFunction wide(3, out_.hasCounts());
+        wide.reserve(out_.size());
+        std::size_t layer = 1;
+        for (std::size_t i = 0; i < out_.size(); ++i) {
+            for (; layer < out_.layerCount() && out_.layerBegin(layer) == i; ++layer) wide.beginLayer();
+            const float v[3] = {out_.value(i), out_.value(i), out_.value(i)};
+            wide.append(out_.z(i), v, out_.count(i));
+        }
+        for (; layer < out_.layerCount(); ++layer) wide.beginLayer();
+        out_ = std::move(wide);
+        for (int c = 1; c < 3; ++c) {
+            originV_[c] = originV_[0];
+            feasible_[c] = feasible_[0];
+            raw_[c] = raw_[0];
+        }
+        channels_ = 3;
+    }
+
+    VisibilityFunction take(int channels) {
         VisibilityFunction result = std::move(out_);
-        out_ = VisibilityFunction(result.channels(), result.hasCounts());
+        channels_ = channels;
+        out_ = VisibilityFunction(channels, result.hasCounts());
         started_ = false;
         open_ = false;
         return result;
     }
 
 private:
-    void windowSlopes(float z, double v, int c, double& lo, double& hi) const {
+    // Opens a segment from the origin to its first vertex beyond the origin's
+    // depth. That window is never empty: the origin is within tolerance of the
+    // input there and the input never increases. Rounding of the origin may
+    // leave a lower bound a hair above 0; a flat segment then stays within
+    // tolerance.
+    template <int C>
+    void open(float z, const double* v, double band) {
         const double dz = static_cast<double>(z) - originZ_;
-        const double top = std::min(v + window_, 1.0);
-        const double bottom = std::max(v - window_, 0.0);
-        lo = (bottom - originV_[c]) / dz;
-        hi = (top - originV_[c]) / dz;
+        for (int c = 0; c < C; ++c) {
+            const double top = std::min(v[c] + band, 1.0) - originV_[c];
+            const double bottom = std::max(v[c] - band, 0.0) - originV_[c];
+            const double hi = std::min(top, 0.0);
+            feasible_[c] = SlopeWindow::of(std::min(bottom, hi), hi, dz);
+            raw_[c] = SlopeWindow::of(v[c] - band - originV_[c], v[c] + band - originV_[c], dz);
+        }
+        open_ = true;
     }
 
-    // The windows before clipping to [0, 1] and to non-increasing lines.
-    void rawSlopes(float z, double v, int c, double& lo, double& hi) const {
-        const double dz = static_cast<double>(z) - originZ_;
-        lo = (v - window_ - originV_[c]) / dz;
-        hi = (v + window_ - originV_[c]) / dz;
-    }
-
-    bool fitsWindow(float z, const double* v) const {
-        for (int c = 0; c < channels_; ++c) {
-            double lo, hi;
-            windowSlopes(z, v[c], c, lo, hi);
-            if (std::max(lo_[c], lo) > std::min(hi_[c], hi)) return false;
+    // Narrows the open segment's windows by the vertex's target windows, or
+    // returns false (leaving them as they were) when a window would be empty.
+    // `feasible_` holds the feasible slopes (output within [0, 1] and never
+    // rising); `raw_` the windows before that clipping, for the midpoint.
+    template <int C>
+    bool extend(float z, const double* v, double band) {
+        const double dz = static_cast<double>(z) - originZ_;  // > 0 while a segment is open
+        SlopeWindow narrowed[C];
+        for (int c = 0; c < C; ++c) {
+            narrowed[c] = feasible_[c];
+            narrowed[c].narrow(std::max(v[c] - band, 0.0) - originV_[c], std::min(v[c] + band, 1.0) - originV_[c], dz);
+            if (narrowed[c].empty()) return false;
+        }
+        for (int c = 0; c < C; ++c) {
+            feasible_[c] = narrowed[c];
+            raw_[c].narrow(v[c] - band - originV_[c], v[c] + band - originV_[c], dz);
         }
         return true;
     }
@@ -131,16 +219,17 @@ private:
     // An input vertex at the origin's depth: only the last value at a depth
     // matters (V is right-continuous), so it either fits the origin value or
     // becomes (or replaces) a step vertex at that depth.
-    void absorbAtOrigin(const double* v, std::uint64_t count) {
+    template <int C>
+    void absorbAtOrigin(const double* v, std::uint64_t count, double band) {
         bool fits = true;
-        for (int c = 0; c < channels_; ++c)
-            if (std::abs(v[c] - originV_[c]) > window_) fits = false;
+        for (int c = 0; c < C; ++c)
+            if (std::abs(v[c] - originV_[c]) > band) fits = false;
         if (fits) {
             addCount(count);
             return;
         }
         float stored[kMaxChannels];
-        for (int c = 0; c < channels_; ++c) {
+        for (int c = 0; c < C; ++c) {
             stored[c] = std::clamp(static_cast<float>(v[c]), 0.0f, static_cast<float>(originV_[c]));
             originV_[c] = stored[c];
         }
@@ -167,18 +256,20 @@ private:
 
     // Emits the segment from the origin to the last accepted input depth with
     // the midpoint slope, and makes its end the new origin.
+    template <int C>
     void closeSegment() {
         const double dz = static_cast<double>(lastZ_) - originZ_;
         float end[kMaxChannels];
         bool flat = true;
-        for (int c = 0; c < channels_; ++c) {
+        for (int c = 0; c < C; ++c) {
             // Lokovic & Veach's midpoint rule, taken on the windows the data
             // itself defines and then moved into the feasible range. Clipping
             // at V = 1 or at slope 0 first would bias the midpoint: flat runs
             // (lit space, the plateau after a surface) would tilt by eps / 2.
-            double slope = 0.5 * (rawLo_[c] + rawHi_[c]);
-            if (!(rawLo_[c] <= rawHi_[c])) slope = 0.5 * (lo_[c] + hi_[c]);
-            slope = std::clamp(slope, lo_[c], hi_[c]);
+            const SlopeWindow& w = feasible_[c];
+            const SlopeWindow& r = raw_[c];
+            double slope = r.empty() ? 0.5 * (w.lo() + w.hi()) : 0.5 * (r.lo() + r.hi());
+            slope = std::clamp(slope, w.lo(), w.hi());
             const double ideal = originV_[c] + slope * dz;
             end[c] = std::clamp(static_cast<float>(ideal), 0.0f, static_cast<float>(originV_[c]));
             if (end[c] != static_cast<float>(originV_[c])) flat = false;
@@ -196,7 +287,7 @@ private:
         out_.addToLastCount(segmentCount_);
         segmentCount_ = 0;
         originZ_ = lastZ_;
-        for (int c = 0; c < channels_; ++c) originV_[c] = end[c];
+        for (int c = 0; c < C; ++c) originV_[c] = end[c];
         originStored_ = true;
         originIsStep_ = false;
     }
@@ -213,10 +304,8 @@ private:
     std::uint64_t originCount_ = 0;  // counts waiting for the first stored vertex
 
     bool open_ = false;  // a segment has accepted at least one vertex beyond the origin
-    double lo_[kMaxChannels] = {};
-    double hi_[kMaxChannels] = {};
-    double rawLo_[kMaxChannels] = {};
-    double rawHi_[kMaxChannels] = {};
+    SlopeWindow feasible_[kMaxChannels] = {};
+    SlopeWindow raw_[kMaxChannels] = {};
     float lastZ_ = 0.0f;
     std::uint64_t segmentCount_ = 0;
 };
@@ -225,18 +314,17 @@ private:
 
 struct Compressor::Impl {
     explicit Impl(const CompressorOptions& o)
-        : options(o),
-          full(o.channels, o.tolerance, o.keepCounts),
-          grey(1, 0.5 * o.tolerance, o.keepCounts),
-          greyPossible(o.channels == kMaxChannels && o.allowMonochrome) {
+        : options(o), grey(greyAtStart(o)), greedy(grey ? 1 : o.channels, o.tolerance, o.keepCounts) {
         resetsLeft = std::max(o.maxLayers, 1) - 1;
     }
 
+    // RGB input that may be stored monochrome starts as one channel, the
+    // channels' mid-range, and widens to RGB when they disagree.
+    static bool greyAtStart(const CompressorOptions& o) { return o.channels == kMaxChannels && o.allowMonochrome; }
+
     void reset() {
-        full.take();
-        grey.take();
-        greyPossible = options.channels == kMaxChannels && options.allowMonochrome;
-        maxSpread = 0.0;
+        grey = greyAtStart(options);
+        greedy.take(grey ? 1 : options.channels);
         resetsLeft = std::max(options.maxLayers, 1) - 1;
         layerEnding = false;
         layerClosed = false;
@@ -263,25 +351,99 @@ struct Compressor::Impl {
                             detail::concat("compressor: input vertex ", index, " channel ", c, ": visibility ", v[c],
                                            " increases from the previous ", previousV[c]));
         }
+        ++inputIndex;
+        previousZ = z;
+        std::copy(v, v + options.channels, previousV);
+        haveLayerInput = true;
+    }
+
+    template <bool check>
+    bool push(float z, const double* values, std::uint32_t count) {
+        if (layerEnding && z > layerEndZ) {
+            // All light is blocked at layerEndZ: end the layer and refuse this
+            // vertex, so the producer restarts behind that depth.
+            endLayer(true);
+            layerEnding = false;
+            layerClosed = true;
+            return false;
+        }
+        if (layerClosed || layers == 0) {
+            layerClosed = false;
+            startLayer();
+        }
+        if (check) validate(z, values);
+
+        if (options.channels == 1)
+            greedy.push<1>(z, values, count, greedy.window());
+        else if (grey)
+            pushGrey(z, values, count);
+        else
+            greedy.push<3>(z, values, count, greedy.window());
+
+        if (resetsLeft > 0 && !layerEnding) {
+            bool blocked = true;
+            for (int c = 0; c < options.channels; ++c)
+                if (values[c] > options.tolerance) blocked = false;
+            if (blocked) {
+                layerEnding = true;
+                layerEndZ = z;
+                --resetsLeft;
+            }
+        }
+        return true;
+    }
+
+    // push<false>() over a run of vertices; vertices inside a segment that
+    // change nothing take the vectorized path. Returns how many were taken.
+    template <typename T>
+    std::size_t pushRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n) {
+        const std::size_t nc = static_cast<std::size_t>(options.channels);
+        std::size_t i = 0;
+        while (i < n) {
+            // Layer ends are decided vertex by vertex; so is the mid-range.
+            if (kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0 && !grey) {
+                i += options.channels == 1
+                         ? greedy.skipUnchanged<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
+                         : greedy.skipUnchanged<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
+                                                   greedy.window());
+                if (i == n) break;
+            }
+            double values[kMaxChannels];
+            for (std::size_t c = 0; c < nc; ++c) values[c] = static_cast<double>(v[i * nc + c]);
+            if (!push<!kTrustValidInput>(z[i], values, counts ? counts[i] : 0u)) break;
+            ++i;
+        }
+        return i;
+    }
+
+    // The mid-range m of the channels stands for all three while their spread
+    // s stays within the tolerance: its target window m +- (window - s / 2)
+    // keeps every channel within the full window.
+    void pushGrey(float z, const double* values, std::uint32_t count) {
+        const double lo = std::min({values[0], values[1], values[2]});
+        const double hi = std::max({values[0], values[1], values[2]});
+        const double spread = hi - lo;
+        if (spread > options.tolerance || (spread > 0.0 && options.tolerance < 4.0 * kStoreRounding)) {
+            grey = false;
+            greedy.widen();
+            greedy.push<3>(z, values, count, greedy.window());
+            return;
+        }
+        const double mid = 0.5 * (lo + hi);
+        greedy.push<1>(z, &mid, count, greedy.window() - 0.5 * spread);
     }
 
     void startLayer() {
-        full.beginLayer();
-        grey.beginLayer();
+        greedy.beginLayer();
         ++layers;
         haveLayerInput = false;
     }
 
-    void endLayer(bool recordEnd) {
-        full.finishLayer(recordEnd);
-        if (greyPossible) grey.finishLayer(recordEnd);
-    }
+    void endLayer(bool recordEnd) { greedy.finishLayer(recordEnd); }
 
     CompressorOptions options;
-    Greedy full;
-    Greedy grey;          // the channels' mid-range at half tolerance
-    bool greyPossible;
-    double maxSpread = 0.0;
+    bool grey;  // the greedy builder runs on the channels' mid-range
+    Greedy greedy;
     int resetsLeft = 0;
     bool layerEnding = false;  // a vertex at or below tolerance was seen
     float layerEndZ = 0.0f;
@@ -315,54 +477,20 @@ bool Compressor::push(float z, const float* values, std::uint32_t count) {
 }
 
 bool Compressor::push(float z, const double* values, std::uint32_t count) {
-    Impl& s = *impl_;
-    if (s.layerEnding && z > s.layerEndZ) {
-        // All light is blocked at layerEndZ: end the layer and refuse this
-        // vertex, so the producer restarts behind that depth.
-        s.endLayer(true);
-        s.layerEnding = false;
-        s.layerClosed = true;
-        return false;
-    }
-    if (s.layerClosed || s.layers == 0) {
-        s.layerClosed = false;
-        s.startLayer();
-    }
-    s.validate(z, values);
-    ++s.inputIndex;
-    s.previousZ = z;
-    std::copy(values, values + s.options.channels, s.previousV);
-    s.haveLayerInput = true;
+    return impl_->push<true>(z, values, count);
+}
 
-    s.full.push(z, values, count);
-    if (s.greyPossible) {
-        double lo = values[0], hi = values[0];
-        for (int c = 1; c < s.options.channels; ++c) {
-            lo = std::min(lo, values[c]);
-            hi = std::max(hi, values[c]);
-        }
-        s.maxSpread = std::max(s.maxSpread, hi - lo);
-        // Collapsing to the mid-range costs up to half the spread; keep the grey
-        // result only while that and its own half tolerance fit the budget.
-        if (s.maxSpread > s.options.tolerance || (s.maxSpread > 0.0 && s.options.tolerance < 4.0 * kStoreRounding)) {
-            s.greyPossible = false;
-        } else {
-            const double mid = 0.5 * (lo + hi);
-            s.grey.push(z, &mid, count);
-        }
-    }
+bool Compressor::pushValid(float z, const double* values, std::uint32_t count) {
+    return impl_->push<!kTrustValidInput>(z, values, count);
+}
 
-    if (s.resetsLeft > 0 && !s.layerEnding) {
-        bool blocked = true;
-        for (int c = 0; c < s.options.channels; ++c)
-            if (values[c] > s.options.tolerance) blocked = false;
-        if (blocked) {
-            s.layerEnding = true;
-            s.layerEndZ = z;
-            --s.resetsLeft;
-        }
-    }
-    return true;
+std::size_t Compressor::pushValid(const float* z, const float* values, const std::uint32_t* counts, std::size_t n) {
+    return impl_->pushRun(z, values, counts, n);
+}
+
+std::size_t Compressor::pushValid(const float* z, const double* values, const std::uint32_t* counts,
+                                  std::size_t n) {
+    return impl_->pushRun(z, values, counts, n);
 }
 
 void Compressor::beginLayer() {
@@ -382,14 +510,9 @@ VisibilityFunction Compressor::finish() {
     // A layer after the first keeps at least one vertex even when its input
     // stayed at V = 1 within tolerance: an empty last layer is not valid.
     if (!s.layerClosed) s.endLayer(s.layerEnding || s.layers > 1);
-    VisibilityFunction rgb = s.full.take();
-    VisibilityFunction grey = s.grey.take();
-    const bool exactGrey = s.options.channels == kMaxChannels && s.options.allowMonochrome && s.maxSpread == 0.0;
-    const bool useGrey = s.greyPossible && !exactGrey;
+    VisibilityFunction result = s.greedy.take(s.greedy.channels());
     s.reset();
-    if (exactGrey) return rgb.toMonochrome();
-    if (useGrey) return grey;
-    return rgb;
+    return result;
 }
 
 VisibilityFunction compress(const VisibilityFunction& input, double tolerance, bool allowMonochrome) {
