@@ -28,19 +28,6 @@ constexpr bool kTrustValidInput = false;
 struct SlopeWindow {
     double loNum, loDen, hiNum, hiDen;
 
-    static SlopeWindow of(double bottom, double top, double dz) { return {bottom, dz, top, dz}; }
-    // Intersects with [bottom / dz, top / dz]; dz > 0.
-    void narrow(double bottom, double top, double dz) {
-        if (top * hiDen < hiNum * dz) {
-            hiNum = top;
-            hiDen = dz;
-        }
-        if (bottom * loDen > loNum * dz) {
-            loNum = bottom;
-            loDen = dz;
-        }
-    }
-    bool empty() const { return loNum * hiDen > hiNum * loDen; }
     double lo() const { return loNum / loDen; }
     double hi() const { return hiNum / hiDen; }
 };
@@ -57,16 +44,16 @@ public:
         : channels_(channels),
           // Leave room for the float rounding of segment end points, so that the
           // stored function, not just the ideal line, is within tolerance.
-          window_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
+          band_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
           out_(channels, keepCounts) {}
 
     int channels() const { return channels_; }
     // The half-width of the target windows for exact input.
-    double window() const { return window_; }
+    double window() const { return band_; }
 
     // One input vertex with target windows v[c] +- band (0 <= band <= window()).
     template <int C>
-    void push(float z, const double* v, std::uint64_t count, double band) {
+    void push(float z, const double* v, std::uint32_t count, double band) {
         if (!started_) {
             started_ = true;
             originZ_ = z;
@@ -74,55 +61,73 @@ public:
             originStored_ = false;
             originIsStep_ = false;
         }
-        if (open_ && !extend<C>(z, v, band)) closeSegment<C>();
-        if (!open_) {
-            if (z == originZ_) {
-                absorbAtOrigin<C>(v, count, band);
-                return;
-            }
-            open<C>(z, v, band);
+        if (open_) {
+            if (extendRun<C>(&z, v, &count, 1, band) == 1) return;
+            closeSegment<C>();
         }
+        if (z == originZ_) {
+            absorbAtOrigin<C>(v, count, band);
+            return;
+        }
+        open<C>(z, v, band);
         lastZ_ = z;
         segmentCount_ += count;
     }
 
-    // Accepts the leading vertices of a run that leave every window of the
-    // open segment as it is (the common case inside a long segment), without
-    // the per-vertex bookkeeping: the tests are independent across a block of
-    // vertices, so the compiler can vectorize them. Returns how many it took
-    // (0 when no segment is open).
+    // Extends the open segment by the leading vertices of a run that fit it:
+    // narrows its slope window by each vertex's target window and stops (and
+    // leaves the window as it was) at the first vertex that would leave no
+    // feasible slope. Returns how many it took (0 when no segment is open).
+    // The window the data defines (lines within band of the input) is kept;
+    // the feasible slopes are those of it that also keep the output from
+    // rising (slope <= 0) and from going below 0 at the segment's end
+    // (slope >= -origin / dz; V <= 1 follows from not rising). The window
+    // lives in locals through the loop: this is the per-vertex work.
     template <int C, typename T>
-    std::size_t skipUnchanged(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+    std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if (!open_) return 0;
-        constexpr std::size_t kBlock = 8;
-        std::size_t taken = 0;
-        while (n - taken >= kBlock) {
-            bool unchanged[kBlock];
-            for (std::size_t j = 0; j < kBlock; ++j) {
-                const double dz = static_cast<double>(z[taken + j]) - originZ_;
-                bool keep = true;
-                for (int c = 0; c < C; ++c) {
-                    const double value = static_cast<double>(v[(taken + j) * C + static_cast<std::size_t>(c)]);
-                    const double top = std::min(value + band, 1.0) - originV_[c];
-                    const double bottom = std::max(value - band, 0.0) - originV_[c];
-                    const double rawTop = value + band - originV_[c];
-                    const double rawBottom = value - band - originV_[c];
-                    const SlopeWindow& w = feasible_[c];
-                    const SlopeWindow& r = raw_[c];
-                    keep &= (top * w.hiDen >= w.hiNum * dz) & (bottom * w.loDen <= w.loNum * dz) &
-                            (rawTop * r.hiDen >= r.hiNum * dz) & (rawBottom * r.loDen <= r.loNum * dz);
-                }
-                unchanged[j] = keep;
-            }
-            std::size_t j = 0;
-            while (j < kBlock && unchanged[j]) ++j;
-            if (counts)
-                for (std::size_t k = 0; k < j; ++k) segmentCount_ += counts[taken + k];
-            taken += j;
-            if (j < kBlock) break;
+        double loNum[C], loDen[C], hiNum[C], hiDen[C], origin[C];
+        for (int c = 0; c < C; ++c) {
+            loNum[c] = window_[c].loNum;
+            loDen[c] = window_[c].loDen;
+            hiNum[c] = window_[c].hiNum;
+            hiDen[c] = window_[c].hiDen;
+            origin[c] = originV_[c];
         }
-        if (taken > 0) lastZ_ = z[taken - 1];
-        return taken;
+        const double originZ = originZ_;
+        std::uint64_t count = 0;
+        std::size_t i = 0;
+        for (; i < n; ++i) {
+            const double dz = static_cast<double>(z[i]) - originZ;  // > 0 while a segment is open
+            double newLoNum[C], newLoDen[C], newHiNum[C], newHiDen[C];
+            bool feasible = true;
+            for (int c = 0; c < C; ++c) {
+                const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
+                const double top = value + band - origin[c];
+                const double bottom = value - band - origin[c];
+                const bool lowerTop = top * hiDen[c] < hiNum[c] * dz;
+                newHiNum[c] = lowerTop ? top : hiNum[c];
+                newHiDen[c] = lowerTop ? dz : hiDen[c];
+                const bool raiseBottom = bottom * loDen[c] > loNum[c] * dz;
+                newLoNum[c] = raiseBottom ? bottom : loNum[c];
+                newLoDen[c] = raiseBottom ? dz : loDen[c];
+                // max(lo, -origin / dz) <= min(hi, 0)
+                feasible &= (newLoNum[c] * newHiDen[c] <= newHiNum[c] * newLoDen[c]) & (newLoNum[c] <= 0.0) &
+                            (-origin[c] * newHiDen[c] <= newHiNum[c] * dz);
+            }
+            if (!feasible) break;
+            for (int c = 0; c < C; ++c) {
+                loNum[c] = newLoNum[c];
+                loDen[c] = newLoDen[c];
+                hiNum[c] = newHiNum[c];
+                hiDen[c] = newHiDen[c];
+            }
+            if (counts) count += counts[i];
+        }
+        for (int c = 0; c < C; ++c) window_[c] = {loNum[c], loDen[c], hiNum[c], hiDen[c]};
+        segmentCount_ += count;
+        if (i > 0) lastZ_ = z[i - 1];
+        return i;
     }
 
     // Ends the current layer: closes the open segment and makes sure the layer
@@ -155,8 +160,7 @@ public:
         out_ = std::move(wide);
         for (int c = 1; c < 3; ++c) {
             originV_[c] = originV_[0];
-            feasible_[c] = feasible_[0];
-            raw_[c] = raw_[0];
+            window_[c] = window_[0];
         }
         channels_ = 3;
     }
@@ -172,41 +176,15 @@ public:
 
 private:
     // Opens a segment from the origin to its first vertex beyond the origin's
-    // depth. That window is never empty: the origin is within tolerance of the
-    // input there and the input never increases. Rounding of the origin may
-    // leave a lower bound a hair above 0; a flat segment then stays within
-    // tolerance.
+    // depth. Its window of feasible slopes is never empty: the origin is within
+    // tolerance of the input there and the input never increases (rounding of
+    // the origin aside, which closeSegment() absorbs).
     template <int C>
     void open(float z, const double* v, double band) {
         const double dz = static_cast<double>(z) - originZ_;
-        for (int c = 0; c < C; ++c) {
-            const double top = std::min(v[c] + band, 1.0) - originV_[c];
-            const double bottom = std::max(v[c] - band, 0.0) - originV_[c];
-            const double hi = std::min(top, 0.0);
-            feasible_[c] = SlopeWindow::of(std::min(bottom, hi), hi, dz);
-            raw_[c] = SlopeWindow::of(v[c] - band - originV_[c], v[c] + band - originV_[c], dz);
-        }
+        for (int c = 0; c < C; ++c)
+            window_[c] = {v[c] - band - originV_[c], dz, v[c] + band - originV_[c], dz};
         open_ = true;
-    }
-
-    // Narrows the open segment's windows by the vertex's target windows, or
-    // returns false (leaving them as they were) when a window would be empty.
-    // `feasible_` holds the feasible slopes (output within [0, 1] and never
-    // rising); `raw_` the windows before that clipping, for the midpoint.
-    template <int C>
-    bool extend(float z, const double* v, double band) {
-        const double dz = static_cast<double>(z) - originZ_;  // > 0 while a segment is open
-        SlopeWindow narrowed[C];
-        for (int c = 0; c < C; ++c) {
-            narrowed[c] = feasible_[c];
-            narrowed[c].narrow(std::max(v[c] - band, 0.0) - originV_[c], std::min(v[c] + band, 1.0) - originV_[c], dz);
-            if (narrowed[c].empty()) return false;
-        }
-        for (int c = 0; c < C; ++c) {
-            feasible_[c] = narrowed[c];
-            raw_[c].narrow(v[c] - band - originV_[c], v[c] + band - originV_[c], dz);
-        }
-        return true;
     }
 
     void addCount(std::uint64_t count) {
@@ -262,14 +240,14 @@ private:
         float end[kMaxChannels];
         bool flat = true;
         for (int c = 0; c < C; ++c) {
-            // Lokovic & Veach's midpoint rule, taken on the windows the data
+            // Lokovic & Veach's midpoint rule, taken on the window the data
             // itself defines and then moved into the feasible range. Clipping
             // at V = 1 or at slope 0 first would bias the midpoint: flat runs
             // (lit space, the plateau after a surface) would tilt by eps / 2.
-            const SlopeWindow& w = feasible_[c];
-            const SlopeWindow& r = raw_[c];
-            double slope = r.empty() ? 0.5 * (w.lo() + w.hi()) : 0.5 * (r.lo() + r.hi());
-            slope = std::clamp(slope, w.lo(), w.hi());
+            const SlopeWindow& w = window_[c];
+            const double hi = std::min(w.hi(), 0.0);
+            const double lo = std::min(std::max(w.lo(), -originV_[c] / dz), hi);
+            const double slope = std::clamp(0.5 * (w.lo() + w.hi()), lo, hi);
             const double ideal = originV_[c] + slope * dz;
             end[c] = std::clamp(static_cast<float>(ideal), 0.0f, static_cast<float>(originV_[c]));
             if (end[c] != static_cast<float>(originV_[c])) flat = false;
@@ -293,7 +271,7 @@ private:
     }
 
     int channels_;
-    double window_;
+    double band_;
     VisibilityFunction out_;
 
     bool started_ = false;       // the layer has seen input
@@ -304,8 +282,7 @@ private:
     std::uint64_t originCount_ = 0;  // counts waiting for the first stored vertex
 
     bool open_ = false;  // a segment has accepted at least one vertex beyond the origin
-    SlopeWindow feasible_[kMaxChannels] = {};
-    SlopeWindow raw_[kMaxChannels] = {};
+    SlopeWindow window_[kMaxChannels] = {};
     float lastZ_ = 0.0f;
     std::uint64_t segmentCount_ = 0;
 };
@@ -393,8 +370,8 @@ struct Compressor::Impl {
         return true;
     }
 
-    // push<false>() over a run of vertices; vertices inside a segment that
-    // change nothing take the vectorized path. Returns how many were taken.
+    // push<false>() over a run of vertices; vertices that extend the open
+    // segment take the short path. Returns how many were taken.
     template <typename T>
     std::size_t pushRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n) {
         const std::size_t nc = static_cast<std::size_t>(options.channels);
@@ -403,8 +380,8 @@ struct Compressor::Impl {
             // Layer ends are decided vertex by vertex; so is the mid-range.
             if (kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0 && !grey) {
                 i += options.channels == 1
-                         ? greedy.skipUnchanged<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
-                         : greedy.skipUnchanged<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
+                         ? greedy.extendRun<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
+                         : greedy.extendRun<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
                                                    greedy.window());
                 if (i == n) break;
             }
