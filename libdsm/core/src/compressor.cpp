@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <utility>
 
 #include "dsm/error.h"
 #include "text.h"
@@ -21,6 +22,13 @@ constexpr bool kTrustValidInput = true;
 #else
 constexpr bool kTrustValidInput = false;
 #endif
+
+// Calls f(0), ..., f(C - 1), unrolled: the per-vertex loops over channels are
+// too short for a loop to pay.
+template <int C, typename F>
+inline void forEachChannel(F&& f) {
+    [&]<int... c>(std::integer_sequence<int, c...>) { (f(c), ...); }(std::make_integer_sequence<int, C>{});
+}
 
 // A range of slopes lo <= m <= hi of lines from a segment origin, each bound a
 // numerator over a positive denominator (a depth difference), so that a new
@@ -87,13 +95,13 @@ public:
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if (!open_) return 0;
         double loNum[C], loDen[C], hiNum[C], hiDen[C], origin[C];
-        for (int c = 0; c < C; ++c) {
+        forEachChannel<C>([&](int c) {
             loNum[c] = window_[c].loNum;
             loDen[c] = window_[c].loDen;
             hiNum[c] = window_[c].hiNum;
             hiDen[c] = window_[c].hiDen;
             origin[c] = originV_[c];
-        }
+        });
         const double originZ = originZ_;
         std::uint64_t count = 0;
         std::size_t i = 0;
@@ -101,7 +109,7 @@ public:
             const double dz = static_cast<double>(z[i]) - originZ;  // > 0 while a segment is open
             double newLoNum[C], newLoDen[C], newHiNum[C], newHiDen[C];
             bool feasible = true;
-            for (int c = 0; c < C; ++c) {
+            forEachChannel<C>([&](int c) {
                 const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
                 const double top = value + band - origin[c];
                 const double bottom = value - band - origin[c];
@@ -114,17 +122,17 @@ public:
                 // max(lo, -origin / dz) <= min(hi, 0)
                 feasible &= (newLoNum[c] * newHiDen[c] <= newHiNum[c] * newLoDen[c]) & (newLoNum[c] <= 0.0) &
                             (-origin[c] * newHiDen[c] <= newHiNum[c] * dz);
-            }
+            });
             if (!feasible) break;
-            for (int c = 0; c < C; ++c) {
+            forEachChannel<C>([&](int c) {
                 loNum[c] = newLoNum[c];
                 loDen[c] = newLoDen[c];
                 hiNum[c] = newHiNum[c];
                 hiDen[c] = newHiDen[c];
-            }
+            });
             if (counts) count += counts[i];
         }
-        for (int c = 0; c < C; ++c) window_[c] = {loNum[c], loDen[c], hiNum[c], hiDen[c]};
+        forEachChannel<C>([&](int c) { window_[c] = {loNum[c], loDen[c], hiNum[c], hiDen[c]}; });
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
@@ -311,7 +319,20 @@ struct Compressor::Impl {
         haveLayerInput = false;
     }
 
+    // The input checks, one test per check and a single branch for valid
+    // input; throwInvalid() names the first violation.
     void validate(float z, const double* v) {
+        bool valid = std::isfinite(z) & (z >= 0.0f) & ((inputIndex == 0) | (z >= previousZ));
+        for (int c = 0; c < options.channels; ++c)
+            valid &= (v[c] >= 0.0) & (v[c] <= 1.0) & (!haveLayerInput | (v[c] <= previousV[c]));
+        if (!valid) throwInvalid(z, v);
+        ++inputIndex;
+        previousZ = z;
+        for (int c = 0; c < options.channels; ++c) previousV[c] = v[c];
+        haveLayerInput = true;
+    }
+
+    [[noreturn]] void throwInvalid(float z, const double* v) const {
         const auto index = inputIndex;
         if (!std::isfinite(z) || z < 0.0f)
             throw Error(ErrorCode::argument, detail::concat("compressor: input vertex ", index, ": depth ", z,
@@ -328,10 +349,7 @@ struct Compressor::Impl {
                             detail::concat("compressor: input vertex ", index, " channel ", c, ": visibility ", v[c],
                                            " increases from the previous ", previousV[c]));
         }
-        ++inputIndex;
-        previousZ = z;
-        std::copy(v, v + options.channels, previousV);
-        haveLayerInput = true;
+        throw Error(ErrorCode::internal, detail::concat("compressor: input vertex ", index, " failed a check"));
     }
 
     template <bool check>
