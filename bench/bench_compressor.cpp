@@ -36,10 +36,12 @@ struct Tolerance {
 };
 
 std::string compressName(const Input& in, const Tolerance& t) { return "compress/" + in.name + "/eps=" + t.name; }
+std::string runName(const Input& in, const Tolerance& t) { return "pushValid-run/" + in.name + "/eps=" + t.name; }
 std::string memcpyName(const Input& in) { return "memcpy/" + in.name; }
 
 // Outside any timing: the output is a valid function within epsilon of the
-// input (checked at every input depth and between them). The input values are
+// input (checked at every input depth and between them), and the same
+// whether pushed vertex by vertex or as one run. The input values are
 // float already, so the bound is epsilon itself; 1e-9 covers the double
 // evaluation of the two piecewise-linear functions.
 bool checkOutput(const Input& in, const Tolerance& t, std::size_t& outVertices) {
@@ -51,6 +53,11 @@ bool checkOutput(const Input& in, const Tolerance& t, std::size_t& outVertices) 
     for (std::size_t i = 0; i < f.size(); ++i) compressor.push(f.z(i), f.values(i), 0);
     const VisibilityFunction out = compressor.finish();
     outVertices = out.size();
+    compressor.pushValid(f.depths().data(), f.allValues().data(), nullptr, f.size());
+    if (compressor.finish() != out) {
+        std::printf("check %s: pushValid() of the run differs from push() per vertex\n", compressName(in, t).c_str());
+        return false;
+    }
     try {
         out.validate();
     } catch (const Error& e) {
@@ -97,6 +104,26 @@ void benchCompress(benchmark::State& state, const Input* in, double epsilon, std
     state.counters["out_vertices"] = static_cast<double>(outVertices);
 }
 
+// The library's own path: the whole function handed over as one run of
+// vertices known to be valid (what a build does with the sweep's output).
+void benchRun(benchmark::State& state, const Input* in, double epsilon, std::size_t outVertices) {
+    const VisibilityFunction& f = in->function;
+    CompressorOptions options;
+    options.tolerance = epsilon;
+    options.channels = f.channels();
+    Compressor compressor(options);
+    for (auto _ : state) {
+        compressor.pushValid(f.depths().data(), f.allValues().data(), nullptr, f.size());
+        VisibilityFunction out = compressor.finish();
+        benchmark::DoNotOptimize(out.depths().data());
+        benchmark::ClobberMemory();
+    }
+    state.SetItemsProcessed(state.iterations() * static_cast<std::int64_t>(f.size()));
+    state.SetBytesProcessed(state.iterations() * static_cast<std::int64_t>(in->bytes()));
+    state.counters["vertices"] = static_cast<double>(f.size());
+    state.counters["out_vertices"] = static_cast<double>(outVertices);
+}
+
 void benchMemcpy(benchmark::State& state, const Input* in) {
     const VisibilityFunction& f = in->function;
     std::vector<float> z(f.depths().size()), v(f.allValues().size());
@@ -135,10 +162,14 @@ int main(int argc, char** argv) {
     std::fflush(stdout);
 
     for (std::size_t i = 0; i < inputs.size(); ++i) {
-        for (std::size_t t = 0; t < tolerances.size(); ++t)
+        for (std::size_t t = 0; t < tolerances.size(); ++t) {
             benchmark::RegisterBenchmark(compressName(inputs[i], tolerances[t]).c_str(), benchCompress, &inputs[i],
                                          tolerances[t].epsilon, outVertices[i][t])
                 ->Unit(benchmark::kMicrosecond);
+            benchmark::RegisterBenchmark(runName(inputs[i], tolerances[t]).c_str(), benchRun, &inputs[i],
+                                         tolerances[t].epsilon, outVertices[i][t])
+                ->Unit(benchmark::kMicrosecond);
+        }
         benchmark::RegisterBenchmark(memcpyName(inputs[i]).c_str(), benchMemcpy, &inputs[i])
             ->Unit(benchmark::kMicrosecond);
     }
@@ -168,11 +199,12 @@ int main(int argc, char** argv) {
                         formatRate(static_cast<double>(in.bytes()) / tm, "B").c_str(), mm.spreadPercent(), tc / tm);
         }
     }
-    std::printf("\n");
+    std::printf("\n(push: one push() per vertex, input checked; run: pushValid() of the whole function)\n");
     for (const Input& in : inputs)
         for (const Tolerance& t : tolerances)
-            std::printf("compressor/memcpy %s eps=%g = %.1f\n", in.name.c_str(), t.epsilon,
-                        results[compressName(in, t)].median() / results[memcpyName(in)].median());
+            std::printf("compressor/memcpy %s eps=%g: push %.1f, run %.1f\n", in.name.c_str(), t.epsilon,
+                        results[compressName(in, t)].median() / results[memcpyName(in)].median(),
+                        results[runName(in, t)].median() / results[memcpyName(in)].median());
     if (args.smoke) std::printf("(smoke run: the numbers above are not measurements)\n");
     return 0;
 }

@@ -281,6 +281,104 @@ TEST(Compressor, StreamingFloatAndDoublePushAgreeWithCompress) {
     EXPECT_LE(maxErrorAllChannels(f, viaFloat), 0.03 + kSlack);
 }
 
+TEST(Compressor, PushValidRunsAgreeWithPushPerVertex) {
+    // The run path (float and double values, with and without counts) gives
+    // the same function as push() vertex by vertex, whether the run is whole
+    // or split anywhere.
+    std::mt19937_64 rng(52);
+    for (int channels : {1, 3}) {
+        for (double eps : {0.0, 0.001, 0.03, 0.2}) {
+            for (int trial = 0; trial < 4; ++trial) {
+                const VisibilityFunction f = dsm::test::randomMonotone(rng, 300, channels, true);
+                CompressorOptions options;
+                options.tolerance = eps;
+                options.channels = channels;
+                options.keepCounts = true;
+                Compressor c(options);
+                for (std::size_t i = 0; i < f.size(); ++i) ASSERT_TRUE(c.push(f.z(i), f.values(i), f.count(i)));
+                const VisibilityFunction expected = c.finish();
+
+                ASSERT_EQ(c.pushValid(f.depths().data(), f.allValues().data(), f.counts().data(), f.size()), f.size());
+                EXPECT_EQ(c.finish(), expected) << channels << " channels, eps " << eps;
+
+                std::vector<double> values(f.allValues().begin(), f.allValues().end());
+                const std::size_t split = f.size() * static_cast<std::size_t>(trial + 1) / 5;
+                const std::size_t nc = static_cast<std::size_t>(channels);
+                ASSERT_EQ(c.pushValid(f.depths().data(), values.data(), f.counts().data(), split), split);
+                ASSERT_EQ(c.pushValid(f.depths().data() + split, values.data() + split * nc,
+                                      f.counts().data() + split, f.size() - split),
+                          f.size() - split);
+                EXPECT_EQ(c.finish(), expected) << channels << " channels, eps " << eps << ", split " << split;
+
+                options.keepCounts = false;
+                Compressor noCounts(options);
+                ASSERT_EQ(noCounts.pushValid(f.depths().data(), f.allValues().data(), nullptr, f.size()), f.size());
+                const VisibilityFunction g = noCounts.finish();
+                EXPECT_EQ(g.depths().size(), expected.depths().size());
+                EXPECT_LE(maxErrorAllChannels(f, g), eps + kSlack);
+            }
+        }
+    }
+}
+
+TEST(Compressor, PushValidRunStopsWhereALayerEnds) {
+    CompressorOptions options;
+    options.tolerance = 0.05;
+    options.keepCounts = true;
+    options.maxLayers = 2;
+    Compressor c(options);
+    const float z[] = {1.0f, 1.0f, 2.0f, 2.0f, 3.0f, 4.0f};
+    const float v[] = {1.0f, 0.5f, 0.5f, 0.03f, 0.01f, 0.0f};
+    const std::uint32_t counts[] = {0, 1, 0, 1, 1, 1};
+    // The vertex at 3 is beyond the full occlusion at 2: refused.
+    ASSERT_EQ(c.pushValid(z, v, counts, 6), 4u);
+    EXPECT_EQ(c.layerEndDepth(), 2.0f);
+    const float z2[] = {3.0f, 3.0f, 4.0f};
+    const float v2[] = {1.0f, 0.4f, 0.0f};
+    const std::uint32_t counts2[] = {0, 1, 1};
+    ASSERT_EQ(c.pushValid(z2, v2, counts2, 3), 3u);
+    const VisibilityFunction f = c.finish();
+    ASSERT_NO_THROW(f.validate());
+    ASSERT_EQ(f.layerCount(), 2u);
+    EXPECT_EQ(f.totalCount(), 4u);
+    EXPECT_NEAR(f.evaluateLayer(1, 3.0), 0.4, 0.05);
+}
+
+TEST(Compressor, RgbThatTurnsColouredAfterGreyKeepsTheBoundAndItsLayers) {
+    // Grey at first (one pass on the channels' mid-range), coloured later: the
+    // result is RGB, every channel within the bound, the user layers kept.
+    std::mt19937_64 rng(53);
+    dsm::test::RandomShape shape;
+    shape.zeroProbability = 0.0;
+    int widened = 0;
+    for (double eps : {0.01, 0.05}) {
+        for (int trial = 0; trial < 10; ++trial) {
+            const VisibilityFunction mono = dsm::test::randomMonotone(rng, 80, 1, true, shape);
+            VisibilityFunction f(3, true);
+            const std::size_t colourFrom = mono.size() / 4 + static_cast<std::size_t>(trial);
+            float blue = 1.0f;
+            double spread = 0.0;
+            for (std::size_t i = 0; i < mono.size(); ++i) {
+                if (i == mono.size() / 3) f.beginLayer();
+                const float v = mono.value(i);
+                blue = std::min(blue, i < colourFrom ? v : std::max(0.0f, v - 3.0f * static_cast<float>(eps)));
+                const float rgb[3] = {v, v, blue};
+                spread = std::max(spread, static_cast<double>(v - blue));
+                f.append(mono.z(i), rgb, mono.count(i));
+            }
+            if (spread <= eps) continue;  // grey within tolerance throughout: monochrome
+            ++widened;
+            const VisibilityFunction g = dsm::compress(f, eps);
+            EXPECT_EQ(g.channels(), 3) << "eps " << eps << " trial " << trial;
+            EXPECT_EQ(g.layerCount(), 2u);
+            for (std::size_t layer = 0; layer < 2; ++layer)
+                EXPECT_LE(dsm::test::maxError(f, g, layer), eps + kSlack) << "eps " << eps << " layer " << layer;
+            expectValidOutput(f, g);
+        }
+    }
+    EXPECT_GE(widened, 10);
+}
+
 TEST(Compressor, DoubleInputBoundIncludesFloatRounding) {
     // Values that are not floats: the bound is max(eps, 2^-25).
     std::mt19937_64 rng(51);

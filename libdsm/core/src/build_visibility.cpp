@@ -29,11 +29,10 @@ public:
         v_.clear();
         count_.clear();
     }
-    // Feeds the compressor until it refuses a vertex; returns false then.
+    // Feeds the compressor (the sweep's output is valid input) until it
+    // refuses a vertex; returns false then.
     bool replay(Compressor& compressor) const {
-        for (std::size_t i = 0; i < z_.size(); ++i)
-            if (!compressor.push(z_[i], v_.data() + i * static_cast<std::size_t>(channels_), count_[i])) return false;
-        return true;
+        return compressor.pushValid(z_.data(), v_.data(), count_.data(), z_.size()) == z_.size();
     }
 
 private:

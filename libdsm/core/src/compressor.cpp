@@ -2,7 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
+#include <utility>
 
 #include "dsm/error.h"
 #include "text.h"
@@ -15,71 +15,133 @@ namespace {
 // float spacing just below 1.
 constexpr double kStoreRounding = 0x1p-25;
 
+// pushValid() checks its input only in debug builds.
+#ifdef NDEBUG
+constexpr bool kTrustValidInput = true;
+#else
+constexpr bool kTrustValidInput = false;
+#endif
+
+// Calls f(0), ..., f(C - 1), unrolled: the per-vertex loops over channels are
+// too short for a loop to pay.
+template <int C, typename F>
+inline void forEachChannel(F&& f) {
+    [&]<int... c>(std::integer_sequence<int, c...>) { (f(c), ...); }(std::make_integer_sequence<int, C>{});
+}
+
+// A range of slopes lo <= m <= hi of lines from a segment origin, each bound a
+// numerator over a positive denominator (a depth difference), so that a new
+// bound is compared by cross products instead of divisions.
+struct SlopeWindow {
+    double loNum, loDen, hiNum, hiDen;
+
+    double lo() const { return loNum / loDen; }
+    double hi() const { return hiNum / hiDen; }
+};
+
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
-// all channels at once, writing straight into `out`. The segment origin is the
-// last stored vertex (exact float values), or a "virtual" origin at V = 1 while
-// the layer has stored nothing (V = 1 is implicit before the first vertex).
+// writing straight into `out`. The segment origin is the last stored vertex
+// (exact float values), or a "virtual" origin at V = 1 while the layer has
+// stored nothing (V = 1 is implicit before the first vertex). The channel
+// count (1 or 3) is a template argument of the per-vertex work, and a
+// 1-channel builder can be widened to 3 mid-stream (see widen()).
 class Greedy {
 public:
     Greedy(int channels, double tolerance, bool keepCounts)
         : channels_(channels),
           // Leave room for the float rounding of segment end points, so that the
           // stored function, not just the ideal line, is within tolerance.
-          window_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
+          band_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
           out_(channels, keepCounts) {}
 
-    void push(float z, const double* v, std::uint64_t count) {
+    int channels() const { return channels_; }
+    // The half-width of the target windows for exact input.
+    double window() const { return band_; }
+
+    // One input vertex with target windows v[c] +- band (0 <= band <= window()).
+    template <int C>
+    void push(float z, const double* v, std::uint32_t count, double band) {
         if (!started_) {
             started_ = true;
             originZ_ = z;
-            std::fill(originV_, originV_ + channels_, 1.0);
+            std::fill(originV_, originV_ + C, 1.0);
             originStored_ = false;
             originIsStep_ = false;
         }
-        if (!open_ && z == originZ_) {
-            absorbAtOrigin(v, count);
+        if (open_) {
+            if (extendRun<C>(&z, v, &count, 1, band) == 1) return;
+            closeSegment<C>();
+        }
+        if (z == originZ_) {
+            absorbAtOrigin<C>(v, count, band);
             return;
         }
-        if (open_ && !fitsWindow(z, v)) {
-            closeSegment();
-            if (z == originZ_) {
-                absorbAtOrigin(v, count);
-                return;
-            }
-        }
-        if (!open_) {
-            // The first window after an origin is always reachable: the origin is
-            // within tolerance of the input there and the input never increases.
-            // Rounding of the origin may leave a lower bound a hair above 0;
-            // a flat segment then stays within tolerance.
-            open_ = true;
-            for (int c = 0; c < channels_; ++c) {
-                double lo, hi;
-                windowSlopes(z, v[c], c, lo, hi);
-                hi_[c] = std::min(hi, 0.0);
-                lo_[c] = std::min(lo, hi_[c]);
-                rawSlopes(z, v[c], c, rawLo_[c], rawHi_[c]);
-            }
-        } else {
-            for (int c = 0; c < channels_; ++c) {
-                double lo, hi;
-                windowSlopes(z, v[c], c, lo, hi);
-                lo_[c] = std::max(lo_[c], lo);
-                hi_[c] = std::min(hi_[c], hi);
-                rawSlopes(z, v[c], c, lo, hi);
-                rawLo_[c] = std::max(rawLo_[c], lo);
-                rawHi_[c] = std::min(rawHi_[c], hi);
-            }
-        }
+        open<C>(z, v, band);
         lastZ_ = z;
         segmentCount_ += count;
+    }
+
+    // Extends the open segment by the leading vertices of a run that fit it:
+    // narrows its slope window by each vertex's target window and stops (and
+    // leaves the window as it was) at the first vertex that would leave no
+    // feasible slope. Returns how many it took (0 when no segment is open).
+    // The window the data defines (lines within band of the input) is kept;
+    // the feasible slopes are those of it that also keep the output from
+    // rising (slope <= 0) and from going below 0 at the segment's end
+    // (slope >= -origin / dz; V <= 1 follows from not rising). The window
+    // lives in locals through the loop: this is the per-vertex work.
+    template <int C, typename T>
+    std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+        if (!open_) return 0;
+        double loNum[C], loDen[C], hiNum[C], hiDen[C], origin[C];
+        forEachChannel<C>([&](int c) {
+            loNum[c] = window_[c].loNum;
+            loDen[c] = window_[c].loDen;
+            hiNum[c] = window_[c].hiNum;
+            hiDen[c] = window_[c].hiDen;
+            origin[c] = originV_[c];
+        });
+        const double originZ = originZ_;
+        std::uint64_t count = 0;
+        std::size_t i = 0;
+        for (; i < n; ++i) {
+            const double dz = static_cast<double>(z[i]) - originZ;  // > 0 while a segment is open
+            double newLoNum[C], newLoDen[C], newHiNum[C], newHiDen[C];
+            bool feasible = true;
+            forEachChannel<C>([&](int c) {
+                const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
+                const double top = value + band - origin[c];
+                const double bottom = value - band - origin[c];
+                const bool lowerTop = top * hiDen[c] < hiNum[c] * dz;
+                newHiNum[c] = lowerTop ? top : hiNum[c];
+                newHiDen[c] = lowerTop ? dz : hiDen[c];
+                const bool raiseBottom = bottom * loDen[c] > loNum[c] * dz;
+                newLoNum[c] = raiseBottom ? bottom : loNum[c];
+                newLoDen[c] = raiseBottom ? dz : loDen[c];
+                // max(lo, -origin / dz) <= min(hi, 0)
+                feasible &= (newLoNum[c] * newHiDen[c] <= newHiNum[c] * newLoDen[c]) & (newLoNum[c] <= 0.0) &
+                            (-origin[c] * newHiDen[c] <= newHiNum[c] * dz);
+            });
+            if (!feasible) break;
+            forEachChannel<C>([&](int c) {
+                loNum[c] = newLoNum[c];
+                loDen[c] = newLoDen[c];
+                hiNum[c] = newHiNum[c];
+                hiDen[c] = newHiDen[c];
+            });
+            if (counts) count += counts[i];
+        }
+        forEachChannel<C>([&](int c) { window_[c] = {loNum[c], loDen[c], hiNum[c], hiDen[c]}; });
+        segmentCount_ += count;
+        if (i > 0) lastZ_ = z[i - 1];
+        return i;
     }
 
     // Ends the current layer: closes the open segment and makes sure the layer
     // stores at least one vertex when it must (its end depth, or counts).
     void finishLayer(bool recordEnd) {
         if (!started_) return;
-        if (open_) closeSegment();
+        if (open_) channels_ == 1 ? closeSegment<1>() : closeSegment<3>();
         if (!originStored_ && (recordEnd || originCount_ > 0)) storeOrigin();
         started_ = false;
     }
@@ -88,37 +150,48 @@ public:
         if (!out_.empty()) out_.beginLayer();
     }
 
-    VisibilityFunction take() {
+    // Turns a 1-channel builder into a 3-channel one with every channel equal
+    // to the single one so far: its output is replicated and its open windows
+    // become each channel's windows. Valid for three input channels that the
+    // single channel's targets kept within every channel's tolerance.
+    void widen() {
+        VisibilityFunction wide(3, out_.hasCounts());
+        wide.reserve(out_.size());
+        std::size_t layer = 1;
+        for (std::size_t i = 0; i < out_.size(); ++i) {
+            for (; layer < out_.layerCount() && out_.layerBegin(layer) == i; ++layer) wide.beginLayer();
+            const float v[3] = {out_.value(i), out_.value(i), out_.value(i)};
+            wide.append(out_.z(i), v, out_.count(i));
+        }
+        for (; layer < out_.layerCount(); ++layer) wide.beginLayer();
+        out_ = std::move(wide);
+        for (int c = 1; c < 3; ++c) {
+            originV_[c] = originV_[0];
+            window_[c] = window_[0];
+        }
+        channels_ = 3;
+    }
+
+    VisibilityFunction take(int channels) {
         VisibilityFunction result = std::move(out_);
-        out_ = VisibilityFunction(result.channels(), result.hasCounts());
+        channels_ = channels;
+        out_ = VisibilityFunction(channels, result.hasCounts());
         started_ = false;
         open_ = false;
         return result;
     }
 
 private:
-    void windowSlopes(float z, double v, int c, double& lo, double& hi) const {
+    // Opens a segment from the origin to its first vertex beyond the origin's
+    // depth. Its window of feasible slopes is never empty: the origin is within
+    // tolerance of the input there and the input never increases (rounding of
+    // the origin aside, which closeSegment() absorbs).
+    template <int C>
+    void open(float z, const double* v, double band) {
         const double dz = static_cast<double>(z) - originZ_;
-        const double top = std::min(v + window_, 1.0);
-        const double bottom = std::max(v - window_, 0.0);
-        lo = (bottom - originV_[c]) / dz;
-        hi = (top - originV_[c]) / dz;
-    }
-
-    // The windows before clipping to [0, 1] and to non-increasing lines.
-    void rawSlopes(float z, double v, int c, double& lo, double& hi) const {
-        const double dz = static_cast<double>(z) - originZ_;
-        lo = (v - window_ - originV_[c]) / dz;
-        hi = (v + window_ - originV_[c]) / dz;
-    }
-
-    bool fitsWindow(float z, const double* v) const {
-        for (int c = 0; c < channels_; ++c) {
-            double lo, hi;
-            windowSlopes(z, v[c], c, lo, hi);
-            if (std::max(lo_[c], lo) > std::min(hi_[c], hi)) return false;
-        }
-        return true;
+        for (int c = 0; c < C; ++c)
+            window_[c] = {v[c] - band - originV_[c], dz, v[c] + band - originV_[c], dz};
+        open_ = true;
     }
 
     void addCount(std::uint64_t count) {
@@ -131,16 +204,17 @@ private:
     // An input vertex at the origin's depth: only the last value at a depth
     // matters (V is right-continuous), so it either fits the origin value or
     // becomes (or replaces) a step vertex at that depth.
-    void absorbAtOrigin(const double* v, std::uint64_t count) {
+    template <int C>
+    void absorbAtOrigin(const double* v, std::uint64_t count, double band) {
         bool fits = true;
-        for (int c = 0; c < channels_; ++c)
-            if (std::abs(v[c] - originV_[c]) > window_) fits = false;
+        for (int c = 0; c < C; ++c)
+            if (std::abs(v[c] - originV_[c]) > band) fits = false;
         if (fits) {
             addCount(count);
             return;
         }
         float stored[kMaxChannels];
-        for (int c = 0; c < channels_; ++c) {
+        for (int c = 0; c < C; ++c) {
             stored[c] = std::clamp(static_cast<float>(v[c]), 0.0f, static_cast<float>(originV_[c]));
             originV_[c] = stored[c];
         }
@@ -167,18 +241,20 @@ private:
 
     // Emits the segment from the origin to the last accepted input depth with
     // the midpoint slope, and makes its end the new origin.
+    template <int C>
     void closeSegment() {
         const double dz = static_cast<double>(lastZ_) - originZ_;
         float end[kMaxChannels];
         bool flat = true;
-        for (int c = 0; c < channels_; ++c) {
-            // Lokovic & Veach's midpoint rule, taken on the windows the data
+        for (int c = 0; c < C; ++c) {
+            // Lokovic & Veach's midpoint rule, taken on the window the data
             // itself defines and then moved into the feasible range. Clipping
             // at V = 1 or at slope 0 first would bias the midpoint: flat runs
             // (lit space, the plateau after a surface) would tilt by eps / 2.
-            double slope = 0.5 * (rawLo_[c] + rawHi_[c]);
-            if (!(rawLo_[c] <= rawHi_[c])) slope = 0.5 * (lo_[c] + hi_[c]);
-            slope = std::clamp(slope, lo_[c], hi_[c]);
+            const SlopeWindow& w = window_[c];
+            const double hi = std::min(w.hi(), 0.0);
+            const double lo = std::min(std::max(w.lo(), -originV_[c] / dz), hi);
+            const double slope = std::clamp(0.5 * (w.lo() + w.hi()), lo, hi);
             const double ideal = originV_[c] + slope * dz;
             end[c] = std::clamp(static_cast<float>(ideal), 0.0f, static_cast<float>(originV_[c]));
             if (end[c] != static_cast<float>(originV_[c])) flat = false;
@@ -196,13 +272,13 @@ private:
         out_.addToLastCount(segmentCount_);
         segmentCount_ = 0;
         originZ_ = lastZ_;
-        for (int c = 0; c < channels_; ++c) originV_[c] = end[c];
+        for (int c = 0; c < C; ++c) originV_[c] = end[c];
         originStored_ = true;
         originIsStep_ = false;
     }
 
     int channels_;
-    double window_;
+    double band_;
     VisibilityFunction out_;
 
     bool started_ = false;       // the layer has seen input
@@ -213,10 +289,7 @@ private:
     std::uint64_t originCount_ = 0;  // counts waiting for the first stored vertex
 
     bool open_ = false;  // a segment has accepted at least one vertex beyond the origin
-    double lo_[kMaxChannels] = {};
-    double hi_[kMaxChannels] = {};
-    double rawLo_[kMaxChannels] = {};
-    double rawHi_[kMaxChannels] = {};
+    SlopeWindow window_[kMaxChannels] = {};
     float lastZ_ = 0.0f;
     std::uint64_t segmentCount_ = 0;
 };
@@ -225,18 +298,17 @@ private:
 
 struct Compressor::Impl {
     explicit Impl(const CompressorOptions& o)
-        : options(o),
-          full(o.channels, o.tolerance, o.keepCounts),
-          grey(1, 0.5 * o.tolerance, o.keepCounts),
-          greyPossible(o.channels == kMaxChannels && o.allowMonochrome) {
+        : options(o), grey(greyAtStart(o)), greedy(grey ? 1 : o.channels, o.tolerance, o.keepCounts) {
         resetsLeft = std::max(o.maxLayers, 1) - 1;
     }
 
+    // RGB input that may be stored monochrome starts as one channel, the
+    // channels' mid-range, and widens to RGB when they disagree.
+    static bool greyAtStart(const CompressorOptions& o) { return o.channels == kMaxChannels && o.allowMonochrome; }
+
     void reset() {
-        full.take();
-        grey.take();
-        greyPossible = options.channels == kMaxChannels && options.allowMonochrome;
-        maxSpread = 0.0;
+        grey = greyAtStart(options);
+        greedy.take(grey ? 1 : options.channels);
         resetsLeft = std::max(options.maxLayers, 1) - 1;
         layerEnding = false;
         layerClosed = false;
@@ -246,7 +318,20 @@ struct Compressor::Impl {
         haveLayerInput = false;
     }
 
+    // The input checks, one test per check and a single branch for valid
+    // input; throwInvalid() names the first violation.
     void validate(float z, const double* v) {
+        bool valid = std::isfinite(z) & (z >= 0.0f) & ((inputIndex == 0) | (z >= previousZ));
+        for (int c = 0; c < options.channels; ++c)
+            valid &= (v[c] >= 0.0) & (v[c] <= 1.0) & (!haveLayerInput | (v[c] <= previousV[c]));
+        if (!valid) throwInvalid(z, v);
+        ++inputIndex;
+        previousZ = z;
+        for (int c = 0; c < options.channels; ++c) previousV[c] = v[c];
+        haveLayerInput = true;
+    }
+
+    [[noreturn]] void throwInvalid(float z, const double* v) const {
         const auto index = inputIndex;
         if (!std::isfinite(z) || z < 0.0f)
             throw Error(ErrorCode::argument, detail::concat("compressor: input vertex ", index, ": depth ", z,
@@ -263,25 +348,96 @@ struct Compressor::Impl {
                             detail::concat("compressor: input vertex ", index, " channel ", c, ": visibility ", v[c],
                                            " increases from the previous ", previousV[c]));
         }
+        throw Error(ErrorCode::internal, detail::concat("compressor: input vertex ", index, " failed a check"));
+    }
+
+    template <bool check>
+    bool push(float z, const double* values, std::uint32_t count) {
+        if (layerEnding && z > layerEndZ) {
+            // All light is blocked at layerEndZ: end the layer and refuse this
+            // vertex, so the producer restarts behind that depth.
+            endLayer(true);
+            layerEnding = false;
+            layerClosed = true;
+            return false;
+        }
+        if (layerClosed || layers == 0) {
+            layerClosed = false;
+            startLayer();
+        }
+        if (check) validate(z, values);
+
+        if (options.channels == 1)
+            greedy.push<1>(z, values, count, greedy.window());
+        else if (grey)
+            pushGrey(z, values, count);
+        else
+            greedy.push<3>(z, values, count, greedy.window());
+
+        if (resetsLeft > 0 && !layerEnding) {
+            bool blocked = true;
+            for (int c = 0; c < options.channels; ++c)
+                if (values[c] > options.tolerance) blocked = false;
+            if (blocked) {
+                layerEnding = true;
+                layerEndZ = z;
+                --resetsLeft;
+            }
+        }
+        return true;
+    }
+
+    // push<false>() over a run of vertices; vertices that extend the open
+    // segment take the short path. Returns how many were taken.
+    template <typename T>
+    std::size_t pushRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n) {
+        const std::size_t nc = static_cast<std::size_t>(options.channels);
+        std::size_t i = 0;
+        while (i < n) {
+            // Layer ends are decided vertex by vertex; so is the mid-range.
+            if (kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0 && !grey) {
+                i += options.channels == 1
+                         ? greedy.extendRun<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
+                         : greedy.extendRun<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
+                                                   greedy.window());
+                if (i == n) break;
+            }
+            double values[kMaxChannels];
+            for (std::size_t c = 0; c < nc; ++c) values[c] = static_cast<double>(v[i * nc + c]);
+            if (!push<!kTrustValidInput>(z[i], values, counts ? counts[i] : 0u)) break;
+            ++i;
+        }
+        return i;
+    }
+
+    // The mid-range m of the channels stands for all three while their spread
+    // s stays within the tolerance: its target window m +- (window - s / 2)
+    // keeps every channel within the full window.
+    void pushGrey(float z, const double* values, std::uint32_t count) {
+        const double lo = std::min({values[0], values[1], values[2]});
+        const double hi = std::max({values[0], values[1], values[2]});
+        const double spread = hi - lo;
+        if (spread > options.tolerance || (spread > 0.0 && options.tolerance < 4.0 * kStoreRounding)) {
+            grey = false;
+            greedy.widen();
+            greedy.push<3>(z, values, count, greedy.window());
+            return;
+        }
+        const double mid = 0.5 * (lo + hi);
+        greedy.push<1>(z, &mid, count, greedy.window() - 0.5 * spread);
     }
 
     void startLayer() {
-        full.beginLayer();
-        grey.beginLayer();
+        greedy.beginLayer();
         ++layers;
         haveLayerInput = false;
     }
 
-    void endLayer(bool recordEnd) {
-        full.finishLayer(recordEnd);
-        if (greyPossible) grey.finishLayer(recordEnd);
-    }
+    void endLayer(bool recordEnd) { greedy.finishLayer(recordEnd); }
 
     CompressorOptions options;
-    Greedy full;
-    Greedy grey;          // the channels' mid-range at half tolerance
-    bool greyPossible;
-    double maxSpread = 0.0;
+    bool grey;  // the greedy builder runs on the channels' mid-range
+    Greedy greedy;
     int resetsLeft = 0;
     bool layerEnding = false;  // a vertex at or below tolerance was seen
     float layerEndZ = 0.0f;
@@ -315,54 +471,20 @@ bool Compressor::push(float z, const float* values, std::uint32_t count) {
 }
 
 bool Compressor::push(float z, const double* values, std::uint32_t count) {
-    Impl& s = *impl_;
-    if (s.layerEnding && z > s.layerEndZ) {
-        // All light is blocked at layerEndZ: end the layer and refuse this
-        // vertex, so the producer restarts behind that depth.
-        s.endLayer(true);
-        s.layerEnding = false;
-        s.layerClosed = true;
-        return false;
-    }
-    if (s.layerClosed || s.layers == 0) {
-        s.layerClosed = false;
-        s.startLayer();
-    }
-    s.validate(z, values);
-    ++s.inputIndex;
-    s.previousZ = z;
-    std::copy(values, values + s.options.channels, s.previousV);
-    s.haveLayerInput = true;
+    return impl_->push<true>(z, values, count);
+}
 
-    s.full.push(z, values, count);
-    if (s.greyPossible) {
-        double lo = values[0], hi = values[0];
-        for (int c = 1; c < s.options.channels; ++c) {
-            lo = std::min(lo, values[c]);
-            hi = std::max(hi, values[c]);
-        }
-        s.maxSpread = std::max(s.maxSpread, hi - lo);
-        // Collapsing to the mid-range costs up to half the spread; keep the grey
-        // result only while that and its own half tolerance fit the budget.
-        if (s.maxSpread > s.options.tolerance || (s.maxSpread > 0.0 && s.options.tolerance < 4.0 * kStoreRounding)) {
-            s.greyPossible = false;
-        } else {
-            const double mid = 0.5 * (lo + hi);
-            s.grey.push(z, &mid, count);
-        }
-    }
+bool Compressor::pushValid(float z, const double* values, std::uint32_t count) {
+    return impl_->push<!kTrustValidInput>(z, values, count);
+}
 
-    if (s.resetsLeft > 0 && !s.layerEnding) {
-        bool blocked = true;
-        for (int c = 0; c < s.options.channels; ++c)
-            if (values[c] > s.options.tolerance) blocked = false;
-        if (blocked) {
-            s.layerEnding = true;
-            s.layerEndZ = z;
-            --s.resetsLeft;
-        }
-    }
-    return true;
+std::size_t Compressor::pushValid(const float* z, const float* values, const std::uint32_t* counts, std::size_t n) {
+    return impl_->pushRun(z, values, counts, n);
+}
+
+std::size_t Compressor::pushValid(const float* z, const double* values, const std::uint32_t* counts,
+                                  std::size_t n) {
+    return impl_->pushRun(z, values, counts, n);
 }
 
 void Compressor::beginLayer() {
@@ -382,14 +504,9 @@ VisibilityFunction Compressor::finish() {
     // A layer after the first keeps at least one vertex even when its input
     // stayed at V = 1 within tolerance: an empty last layer is not valid.
     if (!s.layerClosed) s.endLayer(s.layerEnding || s.layers > 1);
-    VisibilityFunction rgb = s.full.take();
-    VisibilityFunction grey = s.grey.take();
-    const bool exactGrey = s.options.channels == kMaxChannels && s.options.allowMonochrome && s.maxSpread == 0.0;
-    const bool useGrey = s.greyPossible && !exactGrey;
+    VisibilityFunction result = s.greedy.take(s.greedy.channels());
     s.reset();
-    if (exactGrey) return rgb.toMonochrome();
-    if (useGrey) return grey;
-    return rgb;
+    return result;
 }
 
 VisibilityFunction compress(const VisibilityFunction& input, double tolerance, bool allowMonochrome) {

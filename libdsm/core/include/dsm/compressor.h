@@ -2,6 +2,7 @@
 // §3.3), with sample counts and multilayer resets (Xie et al. 2007, §5.1).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <memory>
 
@@ -66,6 +67,17 @@ public:
     bool push(float z, const double* values, std::uint32_t count) override;
     /// Convenience for float input.
     bool push(float z, const float* values, std::uint32_t count);
+
+    /// push() for input already known to pass the input checks (the library's
+    /// own sweep, functions that passed validate()): the checks run only in
+    /// debug builds. Invalid input then gives an unspecified (but memory-safe)
+    /// result instead of an error.
+    bool pushValid(float z, const double* values, std::uint32_t count);
+    /// pushValid() over n vertices: depths z[i], values[i * channels + c],
+    /// counts[i] (counts may be null: all 0). Returns how many it took: n, or
+    /// fewer when it refused a vertex (as push() returning false).
+    std::size_t pushValid(const float* z, const float* values, const std::uint32_t* counts, std::size_t n);
+    std::size_t pushValid(const float* z, const double* values, const std::uint32_t* counts, std::size_t n);
 
     /// Ends the current layer and starts a new one at V = 1, for input that is
     /// already split into layers. Does not count against maxLayers.
