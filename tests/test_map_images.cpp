@@ -162,7 +162,7 @@ TEST_P(MapImagesTest, RectanglesAreTheWholeLevelsPictureCut) {
         const LevelInfo& L = map->info().levels[level];
         const FloatImage slice = visibilitySlice(*map, level, 1.3), opacity = opacityImage(*map, level),
                          vertices = vertexCountImage(*map, level);
-        for (const PixelRect rect : {PixelRect{0, 0, L.width, L.height}, PixelRect{3, 1, 9, 7},
+        for (const PixelRect rect : {PixelRect{0, 0, L.width, L.height}, PixelRect{3, 1, L.width - 4, L.height - 2},
                                      PixelRect{L.width - 1, L.height - 1, 1, 1}, PixelRect{7, 0, 2, L.height}}) {
             const FloatImage part[] = {visibilitySlice(*map, level, 1.3, rect), opacityImage(*map, level, rect),
                                        vertexCountImage(*map, level, rect), layerCountImage(*map, level, rect)};

@@ -5,12 +5,17 @@ protocol (python3-websocket), against dsm-info's pictures and JSON.
   dsm_view_browser_test.py CHECK --dsm-view EXE --dsm-info EXE --maps DIR --work DIR
                                  [--screenshots DIR]
 
-CHECK is one of: opacity, pixel, slice, difference, views, security. The maps
+CHECK is one of: opacity, pixel, slice, difference, views, security, usage. The maps
 (DIR/a.dsm, DIR/b.dsm: the same scene built twice with different sample counts;
 DIR/mtsm.dsm: a map with layers) are made by the fixture (check 'maps'). Each
 check starts dsm-view and Chromium itself, on the loopback address and free
 ports, under --work, and stops both by their process ids. Screenshots are saved
 in --screenshots (the test's artefacts; docs/dsm-view.md shows some of them).
+
+  dsm_view_browser_test.py measure --dsm-view EXE --dsm-info EXE --maps DIR --work DIR MAP
+
+prints the figures of docs/dsm-view.md for MAP (time to the first picture, per
+tile request, dsm-info --opacity of the same level).
 """
 import argparse
 import base64
@@ -241,16 +246,16 @@ def check_pixel(args, browser, viewer):
         pixels.append((x, y))
         browser.wait_for(f"(dsmView.state.pixels || []).length === {len(pixels)}", "the pixel's function")
     plotted = browser.evaluate("dsmView.state.plotted")
+    functions = {}
     for x, y in pixels:
-        expected = json.loads(run([args.dsm_info, "--json", "--pixel", f"{x},{y}", a]))["pixel"]["vertices"]
+        expected = functions[(x, y)] = json.loads(run([args.dsm_info, "--json", "--pixel", f"{x},{y}", a]))["pixel"]["vertices"]
         got = [v for v in plotted if (v["x"], v["y"]) == (x, y)]
         if [(v["z"], v["value"], v["layer"]) for v in got] != [(v["z"], v["value"], v["layer"]) for v in expected]:
             fail(f"pixel {x},{y}: plotted vertices {got[:3]}... differ from dsm-info's {expected[:3]}...")
         if not expected:
             fail(f"pixel {x},{y} is empty: choose a pixel with vertices")
     rows = browser.evaluate("document.querySelectorAll('#vertex-table tr').length")
-    expected_rows = sum(len(json.loads(run([args.dsm_info, "--json", "--pixel", f"{x},{y}", a]))["pixel"]["vertices"]) + 1
-                        for x, y in pixels)
+    expected_rows = sum(len(functions[p]) + 1 for p in pixels)
     if rows != expected_rows:
         fail(f"vertex table has {rows} rows, expected {expected_rows}")
     # Hovering the plot reads out z and V.
@@ -381,6 +386,10 @@ def check_views(args, browser, viewer):
                     if (t["tx"], t["ty"]) == (0, 0)][0]
             if f"{tile['vertices']} vertices" not in text or f"{tile['stored_bytes']} bytes stored" not in text:
                 fail(f"tile statistics {text!r} differ from dsm-info's {tile}")
+            if not browser.evaluate("getComputedStyle(document.getElementById('tile-stats')).display !== 'none'"):
+                fail("tile statistics hidden")
+        if kind == "soft":
+            check_soft_values(args, browser, mtsm)
         browser.screenshot(shot(args, kind))
 
 
@@ -395,6 +404,38 @@ def reply_complete(reply):
         if name.strip().lower() == b"content-length":
             return len(body) >= int(value.strip())
     return False
+
+
+def check_soft_values(args, browser, mtsm):
+    """Once refined (64 rays), pixels of the soft-shadow view equal dsm-lookup's
+    area-light answers for the receivers under the pixels' centres."""
+    browser.wait_for("dsmView.state.softSamples === 64 && dsmView.idle()", "the soft shadow's last refinement")
+    info = json.loads(run([args.dsm_info, "--json", mtsm]))
+    radius = browser.evaluate("dsmView.state.radius")
+    z = browser.evaluate("dsmView.state.sliceZ")
+    level = browser.evaluate("dsmView.state.shownLevel")
+    if level != 0:
+        fail(f"soft shadow shown at level {level}, expected 0 for a small map")
+    xmin, xmax, ymin, ymax = info["camera"]["screen_window"]
+    pixels = [(info["width"] // 2, info["height"] // 2), (info["width"] // 4, 3 * info["height"] // 4), (1, 1)]
+    points = []
+    for x, y in pixels:
+        sx = xmin + (x + 0.5) / info["width"] * (xmax - xmin)
+        sy = ymax - (y + 0.5) / info["height"] * (ymax - ymin)
+        points += ["--point", f"{sx * z!r},{sy * z!r},{z!r}"]
+    answers = run([args.dsm_lookup, mtsm, "--space", "light", "--area-light", f"disk:{radius!r}",
+                   "--light-samples", "64", "--format", "json", *points]).splitlines()
+    seen = set()
+    for (x, y), answer in zip(pixels, answers):
+        want = json.loads(answer)
+        want = want.get("visibility", want.get("v"))
+        want = want[0] if isinstance(want, list) else want
+        got = browser.evaluate(f"dsmView.valuesAt(0, [{x} + 0.5, {y} + 0.5]).values[0]")
+        if abs(got - want) > 1e-6:
+            fail(f"soft shadow at pixel {x},{y}: view {got}, dsm-lookup {want} ({answer})")
+        seen.add(round(want, 3))
+    if len(seen) < 2:
+        fail(f"soft shadow test pixels all give {seen}: choose pixels that differ")
 
 
 def http_status(port, raw):
@@ -472,6 +513,81 @@ def check_security(args, viewer):
             pass
 
 
+def measure(args):
+    """The figures of docs/dsm-view.md: time from starting dsm-view to the
+    first picture in the browser, per 256 x 256 tile request, and dsm-info
+    --opacity of the level shown and of level 0 (one run each)."""
+    (path,) = args.measure_maps
+    browser = Browser(args.work)  # started first: its start-up is not dsm-view's
+    try:
+        started = time.monotonic()
+        viewer = Viewer(args.dsm_view, [path])
+        try:
+            browser.open(viewer.url)
+            first = time.monotonic() - started
+            level = browser.evaluate("dsmView.state.shownLevel")
+            tiles = browser.evaluate("dsmView.tileCount()")
+            browser.screenshot(shot(args, "measure"))
+            info = json.loads(run([args.dsm_info, "--json", path]))
+            width, height = info["levels"][0]["width"], info["levels"][0]["height"]
+            connection = http.client.HTTPConnection("127.0.0.1", viewer.port, timeout=60)
+            times = []
+            for k in range(8):  # eight level-0 tiles across the middle row
+                x, y = (width // 8) * k, height // 2
+                url = f"/api/picture?map=0&level=0&kind=opacity&x={x}&y={y}&w={min(256, width - x)}&h={min(256, height - y)}"
+                t0 = time.monotonic()
+                connection.request("GET", url)
+                response = connection.getresponse()
+                response.read()
+                times.append(time.monotonic() - t0)
+                if response.status != 200:
+                    fail(f"{url}: {response.status}")
+        finally:
+            viewer.stop()
+    finally:
+        browser.stop()
+    results = {"first_picture_s": first, "first_picture_level": level, "first_picture_tiles": tiles,
+               "tile_request_s": sum(times) / len(times)}
+    for name, lvl in (("shown", level), ("zero", 0)):
+        t0 = time.monotonic()
+        run([args.dsm_info, "--opacity", "--level", str(lvl), "-o", os.path.join(args.work, f"level{lvl}.exr"), path])
+        results[f"dsm_info_opacity_level_{name}_s"] = time.monotonic() - t0
+    print(json.dumps(results, indent=2))
+
+
+def check_usage(args):
+    """Exit statuses and messages without serving anything."""
+    a = os.path.join(args.maps, "a.dsm")
+    not_a_map = os.path.join(args.work, "not-a-map.dsm")
+    with open(not_a_map, "w") as f:
+        f.write("hello\n")
+    cases = [
+        ([], 2, "MAP is required"),
+        ([a, a, a], 2, ""),
+        ([a, "--port", "70000"], 2, "--port"),
+        ([a, "--bogus"], 2, "--bogus"),
+        ([os.path.join(args.work, "missing.dsm")], 1, "dsm-view: ERROR '"),
+        ([not_a_map], 1, f"dsm-view: ERROR '{not_a_map}'"),
+        (["-"], 1, "standard input"),
+    ]
+    for arguments, status, message in cases:
+        result = subprocess.run([args.dsm_view, *arguments], capture_output=True, text=True, timeout=30)
+        if result.returncode != status or message not in result.stderr or result.stdout:
+            fail(f"dsm-view {arguments}: exit {result.returncode}, stdout {result.stdout!r}, stderr {result.stderr!r}; "
+                 f"expected exit {status} and {message!r}")
+    # A port in use is an error of status 1, not a silent other port.
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run([args.dsm_view, a, "--port", str(port)], capture_output=True, text=True, timeout=30)
+        if result.returncode != 1 or f"cannot listen on 127.0.0.1:{port}" not in result.stderr:
+            fail(f"port {port} in use: exit {result.returncode}, stderr {result.stderr!r}")
+    result = subprocess.run([args.dsm_view, "--help"], capture_output=True, text=True, timeout=30)
+    if result.returncode != 0 or "--open" not in result.stdout or "docs/dsm-view.md" not in result.stdout:
+        fail(f"--help: exit {result.returncode}, {result.stdout!r}")
+
+
 def make_maps(args):
     os.makedirs(args.maps, exist_ok=True)
     examples = args.examples
@@ -495,16 +611,26 @@ def main():
     parser.add_argument("--dsm-view")
     parser.add_argument("--dsm-info")
     parser.add_argument("--dsm-build")
+    parser.add_argument("--dsm-lookup")
     parser.add_argument("--examples")
     parser.add_argument("--maps", required=True)
     parser.add_argument("--work")
     parser.add_argument("--screenshots")
+    parser.add_argument("measure_maps", nargs="*")
     args = parser.parse_args()
     if args.check == "maps":
         make_maps(args)
         return
+    if args.check == "measure":
+        os.makedirs(args.work, exist_ok=True)
+        measure(args)
+        return
     shutil.rmtree(args.work, ignore_errors=True)
     os.makedirs(args.work)
+    if args.check == "usage":
+        check_usage(args)
+        print("dsm-view usage: OK")
+        return
     maps = {"difference": ["a.dsm", "b.dsm"], "views": ["mtsm.dsm"]}.get(args.check, ["a.dsm"])
     viewer = Viewer(args.dsm_view, [os.path.join(args.maps, m) for m in maps])
     browser = None

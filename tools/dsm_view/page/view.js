@@ -29,6 +29,7 @@ const state = {
 };
 
 const tiles = new Map();   // key -> {values, channels, w, h, canvas, colouring}
+const lastLoaded = new Map();  // source|level|tx|ty -> the tile drawn while a refined one loads
 const queue = [];          // keys waiting to be fetched
 let inFlight = 0;
 let pending = 0;           // fetches queued or in flight
@@ -37,6 +38,9 @@ let pending = 0;           // fetches queued or in flight
 // Maps, levels and what each panel shows
 
 function info(m) { return state.maps[m].info; }
+
+/// A map's file name without its directories, for titles.
+function mapName(m) { return state.maps[m].name.split('/').pop(); }
 
 /// The maps shown by panel p: [map] or [map, minus] for a difference.
 function panelSource(p) {
@@ -97,7 +101,7 @@ function tileUrl(source, level, tx, ty) {
 function request(source, level, tx, ty) {
   const key = tileKey(source, level, tx, ty);
   if (tiles.has(key)) return tiles.get(key);
-  const tile = { loading: true, source, level, tx, ty };
+  const tile = { loading: true, source, level, tx, ty, key };
   tiles.set(key, tile);
   queue.push(key);
   ++pending;
@@ -120,6 +124,8 @@ function pump() {
         tile.w = Math.min(TILE, L.width - tile.tx * TILE);
         tile.h = Math.min(TILE, L.height - tile.ty * TILE);
         tile.loading = false;
+        if (tiles.get(tile.key) === tile)
+          lastLoaded.set(`${tile.source.join('-')}|${tile.level}|${tile.tx}|${tile.ty}`, tile);
         growScale(tile);
       })
       .catch((error) => { tile.error = String(error.message || error); tile.loading = false; showError(tile.error); })
@@ -270,15 +276,19 @@ function drawNow() {
     let complete = true;
     for (let ty = Math.max(0, Math.floor(y0 / span)); ty <= Math.min(Math.ceil(L.height / TILE) - 1, Math.floor(y1 / span)); ++ty)
       for (let tx = Math.max(0, Math.floor(x0 / span)); tx <= Math.min(Math.ceil(L.width / TILE) - 1, Math.floor(x1 / span)); ++tx) {
-        const tile = request(source, level, tx, ty);
-        if (tile.loading || tile.error) { complete = false; continue; }
+        let tile = request(source, level, tx, ty);
+        if (tile.loading || tile.error) {
+          complete = false;
+          tile = lastLoaded.get(`${source.join('-')}|${level}|${tx}|${ty}`);
+          if (!tile) continue;
+        }
         const [sx, sy] = toScreen(canvas, [tx * span, ty * span]);
         context.drawImage(tileCanvas(tile), sx, sy, tile.w * scale * state.zoom, tile.h * scale * state.zoom);
       }
     if (state.kind === 'tiles') drawTileGrid(canvas, context, m, level, scale);
     drawMarks(canvas, context, m);
     panel.querySelector('.title').textContent =
-      `${source.length > 1 ? 'A − B' : state.maps[m].name} · level ${level} (${L.width} × ${L.height})`;
+      `${source.length > 1 ? `${mapName(0)} − ${mapName(1)}` : mapName(m)} · level ${level} (${L.width} × ${L.height})`;
     if (complete && state.firstPictureMs === null && p === 0) {
       state.firstPictureMs = performance.now();
       document.body.dataset.firstPicture = 'drawn';
@@ -295,11 +305,11 @@ function drawTileGrid(canvas, context, m, level, scale) {
   context.beginPath();
   const [ox, oy] = toScreen(canvas, [0, 0]);
   const [ex, ey] = toScreen(canvas, [L.width * scale, L.height * scale]);
-  for (let t = 0; t <= L.tilesX; ++t) {
+  for (let t = 0; t <= L.tiles_x; ++t) {
     const x = Math.round(toScreen(canvas, [Math.min(t * span, L.width * scale), 0])[0]) + 0.5;
     context.moveTo(x, Math.max(0, oy)); context.lineTo(x, Math.min(canvas.height, ey));
   }
-  for (let t = 0; t <= L.tilesY; ++t) {
+  for (let t = 0; t <= L.tiles_y; ++t) {
     const y = Math.round(toScreen(canvas, [0, Math.min(t * span, L.height * scale)])[1]) + 0.5;
     context.moveTo(Math.max(0, ox), y); context.lineTo(Math.min(canvas.width, ex), y);
   }
@@ -406,7 +416,7 @@ function hover(p) {
     const at = valuesAt(q, state.cursor);
     if (!at) continue;
     const source = panelSource(q);
-    const name = source.length > 1 ? 'A − B' : state.maps[source[0]].name;
+    const name = source.length > 1 ? 'A − B' : mapName(source[0]);
     const values = at.values ? at.values.map((v) => Number(v.toPrecision(6))).join(', ') : '…';
     lines.push(`${name}  level ${at.level}  pixel ${at.x},${at.y}  ${pictureKind()} ${values}`);
   }
@@ -422,7 +432,7 @@ function showTileStats(p) {
   const size = info(m).tile_size;
   const tx = Math.floor(state.cursor[0] / scale / size), ty = Math.floor(state.cursor[1] / scale / size);
   const L = info(m).levels[level];
-  if (tx < 0 || ty < 0 || tx >= L.tilesX || ty >= L.tilesY) return;
+  if (tx < 0 || ty < 0 || tx >= L.tiles_x || ty >= L.tiles_y) return;
   const key = `${m}|${level}|${tx}|${ty}`;
   const show = (t) => {
     $('tile-stats').textContent =
@@ -585,7 +595,7 @@ function vertexTable() {
     const d = px.data;
     const title = document.createElement('div');
     title.style.color = px.colour;
-    title.textContent = `${state.maps[px.map].name}: pixel ${px.x},${px.y} of level ${px.level}: ${d.vertices.length} vertices ` +
+    title.textContent = `${mapName(px.map)}: pixel ${px.x},${px.y} of level ${px.level}: ${d.vertices.length} vertices ` +
       `in ${d.layers} layer(s); error bound ${Number(d.error_bound.toPrecision(3))}`;
     box.appendChild(title);
     const table = document.createElement('table');
@@ -647,6 +657,7 @@ function scheduleSoftRefine() {
 
 function changed() {
   state.scaleMax = 0;
+  lastLoaded.clear();
   queue.length = 0;
   for (const [key, tile] of tiles) if (tile.loading) tiles.delete(key);
   scheduleSoftRefine();
@@ -677,7 +688,11 @@ async function start() {
   state.maps = reply.maps;
   state.ramp = reply.ramp;
   const first = info(0);
-  if (state.maps.length > 1) $('compare-box').hidden = false;
+  if (state.maps.length > 1) {
+    $('compare-box').hidden = false;
+    $('compare').options[0].textContent = `A: ${mapName(0)}`;
+    $('compare').options[1].textContent = `B: ${mapName(1)}`;
+  }
   if (state.maps.some((m) => m.info.channels === 3)) $('channel-box').hidden = false;
   if (!state.maps.some((m) => m.info.max_layers > 1)) $('kind').querySelector('[value=soft]').disabled = true;
   first.levels.forEach((L, l) => {
