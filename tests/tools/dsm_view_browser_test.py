@@ -7,7 +7,7 @@ protocol (python3-websocket), against dsm-info's pictures and JSON.
 
 CHECK is one of: opacity, pixel, slice, difference, views, security, usage. The maps
 (DIR/a.dsm, DIR/b.dsm: the same scene built twice with different sample counts;
-DIR/mtsm.dsm: a map with layers) are made by the fixture (check 'maps'). Each
+DIR/mtsm.dsm: a map with layers; DIR/rgb.dsm: a small RGB map) are made by the fixture (check 'maps'). Each
 check starts dsm-view and Chromium itself, on the loopback address and free
 ports, under --work, and stops both by their process ids. Screenshots are saved
 in --screenshots (the test's artefacts; docs/dsm-view.md shows some of them).
@@ -228,6 +228,35 @@ def check_opacity(args, browser, viewer):
     browser.evaluate("dsmView.fit()")
     browser.settle()
     browser.screenshot(shot(args, "opacity"))
+    # An RGB map: as colour, and one channel in grey.
+    rgb = os.path.join(args.maps, "rgb.dsm")
+    width, height = level_size(args.dsm_info, rgb)
+    picture = os.path.join(args.work, "opacity-rgb.png")
+    run([args.dsm_info, "--opacity", "-o", picture, rgb])
+    expected = Image.open(picture).convert("RGB")
+    colour_viewer = Viewer(args.dsm_view, [rgb])
+    try:
+        browser.open(colour_viewer.url)
+        if browser.evaluate("document.getElementById('channel-box').hidden"):
+            fail("an RGB map, but no channel menu")
+        show_level0_at_one_to_one(browser)
+        rgba = canvas_pixels(browser, 0, width, height)
+        for y in range(height):
+            for x in range(width):
+                i = 4 * (y * width + x)
+                if tuple(rgba[i:i + 3]) != expected.getpixel((x, y)):
+                    fail(f"RGB opacity at {x},{y}: view {tuple(rgba[i:i + 3])}, dsm-info {expected.getpixel((x, y))}")
+        browser.evaluate("document.getElementById('channel').value = '1',"
+                         "document.getElementById('channel').dispatchEvent(new Event('change'))")
+        browser.settle()
+        green = Image.open(picture).getchannel("G")
+        green_path = os.path.join(args.work, "opacity-green.png")
+        green.save(green_path)
+        expect_grey_matches(canvas_pixels(browser, 0, width, height), green_path, width, height, "green channel")
+        if len(set(expected.getdata())) < 3 or all(len(set(p)) == 1 for p in expected.getdata()):
+            fail("the RGB test map's opacity is grey: it cannot tell channels apart")
+    finally:
+        colour_viewer.stop()
 
 
 def check_pixel(args, browser, viewer):
@@ -596,6 +625,7 @@ def make_maps(args):
     run(build + [os.path.join(examples, "hairball.json"), "-r", "96x64", "-s", "9", "-o", os.path.join(args.maps, "b.dsm")])
     run(build + [os.path.join(examples, "area-light.json"), "-r", "64", "-s", "4", "-l", "4",
                  "-o", os.path.join(args.maps, "mtsm.dsm")])
+    run([args.make_sample_map, os.path.join(args.maps, "rgb.dsm")])
 
 
 def shot(args, name):
@@ -612,6 +642,7 @@ def main():
     parser.add_argument("--dsm-info")
     parser.add_argument("--dsm-build")
     parser.add_argument("--dsm-lookup")
+    parser.add_argument("--make-sample-map")
     parser.add_argument("--examples")
     parser.add_argument("--maps", required=True)
     parser.add_argument("--work")
