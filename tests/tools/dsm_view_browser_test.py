@@ -37,7 +37,7 @@ try:
 except ImportError as error:  # pragma: no cover - the message is the point
     sys.exit(f"dsm_view_browser_test: {error}: install python3-websocket and python3-pil (scripts/install-deps)")
 
-TIMEOUT = 20.0
+TIMEOUT = 60.0  # seconds for one wait; generous for a loaded machine
 
 
 def fail(message):
