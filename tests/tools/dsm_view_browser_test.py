@@ -387,6 +387,9 @@ def check_views(args, browser, viewer):
     mtsm = os.path.join(args.maps, "mtsm.dsm")
     browser.open(viewer.url)
     for kind in ("vertices", "layers", "tiles", "soft"):
+        if kind == "soft":  # level 1: a quarter of the rays to trace
+            browser.evaluate("document.getElementById('level').value = '1',"
+                             "document.getElementById('level').dispatchEvent(new Event('change'))")
         browser.evaluate(f"document.getElementById('kind').value = '{kind}',"
                          "document.getElementById('kind').dispatchEvent(new Event('change'))")
         browser.settle()
@@ -443,14 +446,16 @@ def check_soft_values(args, browser, mtsm):
     radius = browser.evaluate("dsmView.state.radius")
     z = browser.evaluate("dsmView.state.sliceZ")
     level = browser.evaluate("dsmView.state.shownLevel")
-    if level != 0:
-        fail(f"soft shadow shown at level {level}, expected 0 for a small map")
+    if level != 1:
+        fail(f"soft shadow shown at level {level}, expected the level chosen, 1")
+    scale = info["width"] / info["levels"][level]["width"]
     xmin, xmax, ymin, ymax = info["camera"]["screen_window"]
-    pixels = [(info["width"] // 2, info["height"] // 2), (info["width"] // 4, 3 * info["height"] // 4), (1, 1)]
+    width, height = info["levels"][level]["width"], info["levels"][level]["height"]
+    pixels = [(width // 2, height // 2), (width // 4, 3 * height // 4), (1, 1)]
     points = []
-    for x, y in pixels:
-        sx = xmin + (x + 0.5) / info["width"] * (xmax - xmin)
-        sy = ymax - (y + 0.5) / info["height"] * (ymax - ymin)
+    for x, y in pixels:  # the receiver under the pixel's centre, in level-0 raster units
+        sx = xmin + (x + 0.5) * scale / info["width"] * (xmax - xmin)
+        sy = ymax - (y + 0.5) * scale / info["height"] * (ymax - ymin)
         points += ["--point", f"{sx * z!r},{sy * z!r},{z!r}"]
     answers = run([args.dsm_lookup, mtsm, "--space", "light", "--area-light", f"disk:{radius!r}",
                    "--light-samples", "64", "--format", "json", *points]).splitlines()
@@ -459,7 +464,7 @@ def check_soft_values(args, browser, mtsm):
         want = json.loads(answer)
         want = want.get("visibility", want.get("v"))
         want = want[0] if isinstance(want, list) else want
-        got = browser.evaluate(f"dsmView.valuesAt(0, [{x} + 0.5, {y} + 0.5]).values[0]")
+        got = browser.evaluate(f"dsmView.valuesAt(0, [({x} + 0.5) * {scale}, ({y} + 0.5) * {scale}]).values[0]")
         if abs(got - want) > 1e-6:
             fail(f"soft shadow at pixel {x},{y}: view {got}, dsm-lookup {want} ({answer})")
         seen.add(round(want, 3))
@@ -548,34 +553,43 @@ def measure(args):
     --opacity of the level shown and of level 0 (one run each)."""
     (path,) = args.measure_maps
     browser = Browser(args.work)  # started first: its start-up is not dsm-view's
+    started = time.monotonic()
+    viewer = Viewer(args.dsm_view, [path])
     try:
-        started = time.monotonic()
-        viewer = Viewer(args.dsm_view, [path])
         try:
             browser.open(viewer.url)
             first = time.monotonic() - started
             level = browser.evaluate("dsmView.state.shownLevel")
             tiles = browser.evaluate("dsmView.tileCount()")
+            # The coarse preview came this much before the whole picture (page clock).
+            page_first = browser.evaluate("dsmView.state.firstPictureMs / 1000")  # from the page's navigation
+            page_maps = browser.evaluate("performance.getEntriesByType('resource')"
+                                         ".find(e => e.name.endsWith('/api/maps')).responseEnd / 1000")
+            preview_lead = browser.evaluate("dsmView.state.previewMs === undefined ? null :"
+                                            " (dsmView.state.firstPictureMs - dsmView.state.previewMs) / 1000")
             browser.screenshot(shot(args, "measure"))
-            info = json.loads(run([args.dsm_info, "--json", path]))
-            width, height = info["levels"][0]["width"], info["levels"][0]["height"]
-            connection = http.client.HTTPConnection("127.0.0.1", viewer.port, timeout=60)
-            times = []
-            for k in range(8):  # eight level-0 tiles across the middle row
-                x, y = (width // 8) * k, height // 2
-                url = f"/api/picture?map=0&level=0&kind=opacity&x={x}&y={y}&w={min(256, width - x)}&h={min(256, height - y)}"
-                t0 = time.monotonic()
-                connection.request("GET", url)
-                response = connection.getresponse()
-                response.read()
-                times.append(time.monotonic() - t0)
-                if response.status != 200:
-                    fail(f"{url}: {response.status}")
         finally:
-            viewer.stop()
+            browser.stop()
+        info = json.loads(run([args.dsm_info, "--json", path]))
+        width, height = info["levels"][0]["width"], info["levels"][0]["height"]
+        connection = http.client.HTTPConnection("127.0.0.1", viewer.port, timeout=60)
+        times = []
+        for k in range(8):  # eight level-0 tiles across the middle row
+            x, y = (width // 8) * k, height // 2
+            url = f"/api/picture?map=0&level=0&kind=opacity&x={x}&y={y}&w={min(256, width - x)}&h={min(256, height - y)}"
+            t0 = time.monotonic()
+            connection.request("GET", url)
+            response = connection.getresponse()
+            response.read()
+            times.append(time.monotonic() - t0)
+            if response.status != 200:
+                fail(f"{url}: {response.status}")
+        connection.close()
     finally:
-        browser.stop()
+        viewer.stop()
     results = {"first_picture_s": first, "first_picture_level": level, "first_picture_tiles": tiles,
+               "page_navigation_to_first_picture_s": page_first, "page_navigation_to_map_list_s": page_maps,
+               "coarse_preview_s": None if preview_lead is None else first - preview_lead,
                "tile_request_s": sum(times) / len(times)}
     for name, lvl in (("shown", level), ("zero", 0)):
         t0 = time.monotonic()
@@ -648,7 +662,7 @@ def main():
     parser.add_argument("--work")
     parser.add_argument("--screenshots")
     parser.add_argument("measure_maps", nargs="*")
-    args = parser.parse_args()
+    args = parser.parse_intermixed_args()
     if args.check == "maps":
         make_maps(args)
         return

@@ -265,6 +265,9 @@ bool serveMaps(const std::vector<ViewedMap>& maps, const std::string& host, int 
     // The API takes no bodies; anything but GET and HEAD is refused.
     server.set_payload_max_length(4096);
     server.set_read_timeout(5, 0);
+    // Idle keep-alive connections are closed soon, so that stopping (which
+    // waits for them) is quick.
+    server.set_keep_alive_timeout(1);
     int boundPort = 0;
     server.set_pre_routing_handler([&](const httplib::Request& request, httplib::Response& response) {
         if (request.method != "GET" && request.method != "HEAD") {

@@ -141,6 +141,7 @@ function pump() {
 /// Heat maps and differences are scaled to the largest value seen so far.
 function growScale(tile) {
   if (!isCount() && state.compare !== 'diff') return;
+  if (tile.level !== shownLevel(tile.source[0])) return;  // a preview's counts are of coarser pixels
   let most = state.scaleMax;
   for (const v of tile.values) most = Math.max(most, Math.abs(v));
   if (most > state.scaleMax) {
@@ -271,20 +272,18 @@ function drawNow() {
     if (p === 0) state.shownLevel = level;
     const scale = levelScale(m, level);
     const L = info(m).levels[level];
-    const [x0, y0] = toMap(canvas, 0, 0), [x1, y1] = toMap(canvas, canvas.width, canvas.height);
-    const span = TILE * scale;
-    let complete = true;
-    for (let ty = Math.max(0, Math.floor(y0 / span)); ty <= Math.min(Math.ceil(L.height / TILE) - 1, Math.floor(y1 / span)); ++ty)
-      for (let tx = Math.max(0, Math.floor(x0 / span)); tx <= Math.min(Math.ceil(L.width / TILE) - 1, Math.floor(x1 / span)); ++tx) {
-        let tile = request(source, level, tx, ty);
-        if (tile.loading || tile.error) {
-          complete = false;
-          tile = lastLoaded.get(`${source.join('-')}|${level}|${tx}|${ty}`);
-          if (!tile) continue;
-        }
-        const [sx, sy] = toScreen(canvas, [tx * span, ty * span]);
-        context.drawImage(tileCanvas(tile), sx, sy, tile.w * scale * state.zoom, tile.h * scale * state.zoom);
-      }
+    // Until the level's tiles are all here, a level 8 times coarser (a few
+    // small requests, sent first) fills the panel.
+    const preview = Math.min(info(m).levels.length - 1, level + 3);
+    const loaded = (l) => visibleTiles(canvas, m, l).every(([tx, ty]) => {
+      const tile = tiles.get(tileKey(source, l, tx, ty));
+      return tile && tile.values;
+    });
+    if (preview !== level && !loaded(level)) {
+      drawLevel(canvas, context, source, preview);
+      if (loaded(preview) && state.previewMs === undefined && p === 0) state.previewMs = performance.now();
+    }
+    const complete = drawLevel(canvas, context, source, level);
     if (state.kind === 'tiles') drawTileGrid(canvas, context, m, level, scale);
     drawMarks(canvas, context, m);
     panel.querySelector('.title').textContent =
@@ -294,6 +293,37 @@ function drawNow() {
       document.body.dataset.firstPicture = 'drawn';
     }
   });
+}
+
+/// The [tx, ty] of a level's pictures that the panel's canvas shows.
+function visibleTiles(canvas, m, level) {
+  const scale = levelScale(m, level);
+  const L = info(m).levels[level];
+  const [x0, y0] = toMap(canvas, 0, 0), [x1, y1] = toMap(canvas, canvas.width, canvas.height);
+  const span = TILE * scale;
+  const list = [];
+  for (let ty = Math.max(0, Math.floor(y0 / span)); ty <= Math.min(Math.ceil(L.height / TILE) - 1, Math.floor(y1 / span)); ++ty)
+    for (let tx = Math.max(0, Math.floor(x0 / span)); tx <= Math.min(Math.ceil(L.width / TILE) - 1, Math.floor(x1 / span)); ++tx)
+      list.push([tx, ty]);
+  return list;
+}
+
+/// Draws (and asks for) a level's pictures in view; true when all are here.
+function drawLevel(canvas, context, source, level) {
+  const scale = levelScale(source[0], level);
+  const span = TILE * scale;
+  let complete = true;
+  for (const [tx, ty] of visibleTiles(canvas, source[0], level)) {
+    let tile = request(source, level, tx, ty);
+    if (tile.loading || tile.error) {
+      complete = false;
+      tile = lastLoaded.get(`${source.join('-')}|${level}|${tx}|${ty}`);
+      if (!tile) continue;
+    }
+    const [sx, sy] = toScreen(canvas, [tx * span, ty * span]);
+    context.drawImage(tileCanvas(tile), sx, sy, tile.w * scale * state.zoom, tile.h * scale * state.zoom);
+  }
+  return complete;
 }
 
 function drawTileGrid(canvas, context, m, level, scale) {
