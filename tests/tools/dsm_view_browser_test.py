@@ -510,6 +510,7 @@ def check_security(args, viewer):
         "picture outside": b"GET /api/picture?map=0&level=0&kind=opacity&x=4000000000&y=0&w=300&h=1 HTTP/1.1\r\n" + host + b"\r\n",
         "oversized picture": b"GET /api/picture?map=0&level=0&kind=opacity&x=0&y=0&w=65536&h=65536 HTTP/1.1\r\n" + host + b"\r\n",
         "unknown kind": b"GET /api/picture?map=0&level=0&kind=../../etc&x=0&y=0&w=1&h=1 HTTP/1.1\r\n" + host + b"\r\n",
+        "soft shadow of too many rays per pixel": b"GET /api/picture?map=0&level=0&kind=soft&z=5&radius=0.1&samples=100000&x=0&y=0&w=96&h=64 HTTP/1.1\r\n" + host + b"\r\n",
         "NaN depth": b"GET /api/picture?map=0&level=0&kind=slice&z=nan&x=0&y=0&w=1&h=1 HTTP/1.1\r\n" + host + b"\r\n",
         "oversized URI": b"GET /api/maps?" + b"a" * 20000 + b" HTTP/1.1\r\n" + host + b"\r\n",
         "oversized header": b"GET /api/maps HTTP/1.1\r\n" + host + b"X-Big: " + b"b" * 20000 + b"\r\n\r\n",

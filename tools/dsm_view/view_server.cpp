@@ -175,8 +175,13 @@ private:
             if (kind == "soft") {
                 SoftShadowImageOptions options;
                 options.receiverDepth = numberParam(request, "z");
-                options.shadow.samples = static_cast<int>(unsignedParam(request, "samples", 1025));
+                options.shadow.samples = static_cast<int>(unsignedParam(request, "samples", 257));
                 if (options.shadow.samples < 1) refuse("parameter 'samples' must be at least 1");
+                if (static_cast<std::uint64_t>(rect.width) * rect.height * options.shadow.samples > kMaxSoftShadowRays)
+                    refuse("soft shadow of " + std::to_string(rect.width) + " x " + std::to_string(rect.height) +
+                               " pixels with " + std::to_string(options.shadow.samples) + " rays each traces more than " +
+                               std::to_string(kMaxSoftShadowRays) + " rays",
+                           413);
                 return softShadowImage(softTracer(v, numberParam(request, "radius")), level, rect, options);
             }
             refuse("parameter 'kind' must be opacity, slice, vertices, layers or soft");
@@ -195,10 +200,18 @@ private:
     std::shared_ptr<const SoftShadowTracer> softTracer(const ViewedMap& viewed, double radius) const {
         if (!(radius > 0.0)) refuse("parameter 'radius' must be > 0");
         std::lock_guard lock(tracersMutex_);
+        if (tracers_.size() >= kMaxSoftShadowTracers) tracers_.clear();  // each holds a depth hierarchy
         auto& tracer = tracers_[{viewed.map.get(), radius}];
-        if (!tracer)
-            tracer = std::make_shared<const SoftShadowTracer>(
-                viewed.map, AreaLight::forMap(viewed.map->info(), AreaLightShape::Disk, radius, radius));
+        if (!tracer) {
+            try {
+                tracer = std::make_shared<const SoftShadowTracer>(
+                    viewed.map, AreaLight::forMap(viewed.map->info(), AreaLightShape::Disk, radius, radius));
+            } catch (const Error& e) {
+                tracers_.erase({viewed.map.get(), radius});
+                if (e.code() != ErrorCode::argument) throw;
+                refuse("'" + viewed.name + "': " + e.what());  // a light this map cannot have
+            }
+        }
         return tracer;
     }
 
