@@ -23,7 +23,7 @@ ALLOWED = {
     "format": {"core", "format"},
     "lookup": {"core", "format", "lookup"},
     "soft": {"core", "format", "lookup", "soft"},
-    "ops": {"core", "format", "ops"},
+    "ops": {"core", "format", "lookup", "soft", "ops"},
     "build": CORE_SIDE | {"build"},
     "exr": CORE_SIDE | {"exr"},
     "reference": CORE_SIDE | {"build", "reference"},

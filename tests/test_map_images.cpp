@@ -156,7 +156,64 @@ TEST_P(MapImagesTest, MissingLevelAndNanDepthThrowNamingTheFile) {
     }
 }
 
+TEST_P(MapImagesTest, RectanglesAreTheWholeLevelsPictureCut) {
+    // Rectangles that start and end inside tiles (8 x 8) and across them.
+    for (unsigned level = 0; level < 2; ++level) {
+        const LevelInfo& L = map->info().levels[level];
+        const FloatImage slice = visibilitySlice(*map, level, 1.3), opacity = opacityImage(*map, level),
+                         vertices = vertexCountImage(*map, level);
+        for (const PixelRect rect : {PixelRect{0, 0, L.width, L.height}, PixelRect{3, 1, L.width - 4, L.height - 2},
+                                     PixelRect{L.width - 1, L.height - 1, 1, 1}, PixelRect{7, 0, 2, L.height}}) {
+            const FloatImage part[] = {visibilitySlice(*map, level, 1.3, rect), opacityImage(*map, level, rect),
+                                       vertexCountImage(*map, level, rect), layerCountImage(*map, level, rect)};
+            for (const FloatImage& p : part) {
+                ASSERT_EQ(p.width, rect.width);
+                ASSERT_EQ(p.height, rect.height);
+            }
+            for (std::uint32_t y = 0; y < rect.height; ++y)
+                for (std::uint32_t x = 0; x < rect.width; ++x) {
+                    const std::uint32_t X = rect.x + x, Y = rect.y + y;
+                    for (int c = 0; c < 3; ++c) {
+                        EXPECT_EQ(part[0].at(x, y, c), slice.at(X, Y, c)) << X << "," << Y;
+                        EXPECT_EQ(part[1].at(x, y, c), opacity.at(X, Y, c)) << X << "," << Y;
+                    }
+                    EXPECT_EQ(part[2].at(x, y), vertices.at(X, Y));
+                    const PixelFunction f = map->pixel(level, X, Y);
+                    EXPECT_EQ(part[3].at(x, y), f->empty() ? 0.0f : static_cast<float>(f->layerCount()))
+                        << X << "," << Y;
+                }
+        }
+    }
+}
+
+TEST_P(MapImagesTest, RectanglesOutsideTheLevelThrowNamingTheFile) {
+    const LevelInfo& L = map->info().levels[0];
+    for (const PixelRect rect : {PixelRect{0, 0, 0, 1}, PixelRect{0, 0, L.width + 1, 1}, PixelRect{L.width, 0, 1, 1},
+                                 PixelRect{1, 0, UINT32_MAX, 1}, PixelRect{0, L.height - 1, 1, 2}}) {
+        try {
+            opacityImage(*map, 0, rect);
+            ADD_FAILURE() << "no error for " << rect.x << "," << rect.y << " + " << rect.width << " x " << rect.height;
+        } catch (const Error& e) {
+            EXPECT_EQ(e.code(), ErrorCode::argument);
+            EXPECT_NE(std::string(e.what()).find("sample.dsm"), std::string::npos) << e.what();
+        }
+    }
+}
+
 INSTANTIATE_TEST_SUITE_P(Layers, MapImagesTest, ::testing::Values(1, 2));
+
+TEST(DifferenceImage, SubtractsPerChannelAndSpreadsOneChannel) {
+    FloatImage rgb(2, 1, 3), mono(2, 1, 1);
+    rgb.values = {0.5f, 0.25f, 1.0f, 0.0f, 0.125f, 0.75f};
+    mono.values = {0.25f, 0.5f};
+    const FloatImage d = differenceImage(rgb, mono);
+    ASSERT_EQ(d.channels, 3);
+    EXPECT_EQ(d.values, (std::vector<float>{0.25f, 0.0f, 0.75f, -0.5f, -0.375f, 0.25f}));
+    const FloatImage e = differenceImage(mono, rgb);
+    EXPECT_EQ(e.values, (std::vector<float>{-0.25f, 0.0f, -0.75f, 0.5f, 0.375f, -0.25f}));
+    EXPECT_THROW(differenceImage(rgb, FloatImage(3, 1, 3)), Error);
+    EXPECT_THROW(differenceImage(FloatImage(2, 1, 2), rgb), Error);
+}
 
 TEST(ColourRamp, RunsFromBlackToWhiteWithRisingLuminance) {
     FloatImage counts(11, 1, 1);

@@ -25,6 +25,7 @@
 #include <dsm/sampler.h>
 #include <dsm/scene.h>
 #include <dsm/soft_shadow.h>
+#include <dsm/soft_shadow_image.h>
 
 #include <algorithm>
 #include <array>
@@ -580,3 +581,46 @@ TEST_F(SoftShadow, BadOptionsAndMismatchedLightsAreErrors) {
 }
 
 }  // namespace
+
+// The soft-shadow picture of the floor: each pixel is the receiver on the
+// plane whose light-centre projection is the pixel's centre, traced as one
+// query; the penumbra comes out within the analytic bounds.
+TEST_F(SoftShadow, PictureOfAReceiverPlaneTracesEachPixelsCentre) {
+    const dsm::DeepShadowMap& map = *square_->map;
+    const dsm::MapInfo& info = map.info();
+    dsm::SoftShadowImageOptions options;
+    options.receiverDepth = info.camera.worldToLightSpace({0.0, 0.0, 0.0})[2];  // the floor, y = 0
+    options.shadow = withSamples(256);
+    const unsigned level = 1;
+    const dsm::LevelInfo& L = info.levels[level];
+    const dsm::PixelRect rect{L.width / 4, L.height / 2 - 2, L.width / 2, 4};
+    const dsm::FloatImage image = dsm::softShadowImage(square_->tracer, level, rect, options);
+    ASSERT_EQ(image.width, rect.width);
+    ASSERT_EQ(image.height, rect.height);
+    const double scale = static_cast<double>(info.width) / L.width;
+    dsm::SoftShadowContext context(square_->tracer);
+    bool sawPenumbra = false;
+    for (std::uint32_t j = 0; j < rect.height; ++j)
+        for (std::uint32_t i = 0; i < rect.width; ++i) {
+            // The receiver: on the floor, under the pixel's centre.
+            const double rx = (rect.x + i + 0.5) * scale, ry = (rect.y + j + 0.5) * scale;
+            const auto& w = info.camera.screenWindow;
+            const double sx = w[0] + rx / info.width * (w[1] - w[0]), sy = w[3] - ry / info.height * (w[3] - w[2]);
+            const Vec3 world = square_->tracer->light().lightToWorld(
+                {sx * options.receiverDepth, sy * options.receiverDepth, options.receiverDepth});
+            ASSERT_NEAR(world[1], 0.0, 1e-9);
+            double px = 0.0, py = 0.0, pz = 0.0;
+            ASSERT_TRUE(info.camera.lightToRaster(info.camera.worldToLightSpace(world), static_cast<int>(info.width),
+                                                  static_cast<int>(info.height), px, py, pz));
+            ASSERT_NEAR(px, rx, 1e-6);
+            ASSERT_NEAR(py, ry, 1e-6);
+            const double v = image.at(i, j);
+            EXPECT_EQ(v, static_cast<float>(context.visibility(world, options.shadow).v[0]));
+            const Bounds b = allowed(world, *square_, options.shadow.samples);
+            EXPECT_GE(v, b.lo) << "pixel " << rect.x + i << "," << rect.y + j;
+            EXPECT_LE(v, b.hi) << "pixel " << rect.x + i << "," << rect.y + j;
+            sawPenumbra |= v > 0.05 && v < 0.95;
+        }
+    EXPECT_TRUE(sawPenumbra);
+    EXPECT_THROW(dsm::softShadowImage(square_->tracer, level, {L.width, 0, 1, 1}, options), dsm::Error);
+}

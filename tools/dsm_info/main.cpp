@@ -319,24 +319,13 @@ std::vector<unsigned> selectedLevels(const dsm::DeepShadowMap& map, const std::o
     return all;
 }
 
-struct TileRow {
-    unsigned level;
-    std::uint32_t tx, ty;
-    std::uint32_t x, y, width, height;  ///< the pixels the tile covers
-    dsm::TileSummary summary;
-};
+using dsm::TileRow;
 
 std::vector<TileRow> gatherTiles(const dsm::DeepShadowMap& map, const std::optional<unsigned>& level) {
     std::vector<TileRow> rows;
-    const std::uint32_t size = map.info().tileSize;
     for (const unsigned l : selectedLevels(map, level)) {
-        const dsm::LevelInfo& L = map.info().levels[l];
-        for (std::uint32_t ty = 0; ty < L.tilesY; ++ty)
-            for (std::uint32_t tx = 0; tx < L.tilesX; ++tx) {
-                const std::uint32_t x = tx * size, y = ty * size;
-                rows.push_back({l, tx, ty, x, y, std::min(size, L.width - x), std::min(size, L.height - y),
-                                map.tile(l, tx, ty)});
-            }
+        std::vector<TileRow> tiles = dsm::levelTiles(map, l);
+        rows.insert(rows.end(), tiles.begin(), tiles.end());
     }
     return rows;
 }
@@ -357,34 +346,6 @@ void printTiles(std::ostream& out, const std::vector<TileRow>& rows) {
                    empty ? "-" : hex32(t.summary.crc32)});
     }
     table.print(out, "    ");
-}
-
-Json tilesJson(const std::vector<TileRow>& rows) {
-    Json tiles = Json::array();
-    for (const TileRow& t : rows)
-        tiles.push_back({{"level", t.level},
-                         {"tx", t.tx},
-                         {"ty", t.ty},
-                         {"x", t.x},
-                         {"y", t.y},
-                         {"width", t.width},
-                         {"height", t.height},
-                         {"stored_bytes", t.summary.storedBytes},
-                         {"raw_bytes", t.summary.rawBytes},
-                         {"vertices", t.summary.vertexCount},
-                         {"non_empty_pixels", t.summary.nonEmptyPixels},
-                         {"min_z", t.summary.minZ},
-                         {"max_z", t.summary.maxZ},
-                         {"crc32", t.summary.crc32}});
-    return tiles;
-}
-
-/// Layer of each vertex of a function.
-std::vector<std::size_t> vertexLayers(const dsm::VisibilityView& f) {
-    std::vector<std::size_t> layers(f.size(), 0);
-    for (std::size_t layer = 0; layer < f.layerCount(); ++layer)
-        for (std::size_t i = f.layerBegin(layer); i < f.layerEnd(layer); ++i) layers[i] = layer;
-    return layers;
 }
 
 /// Checks the pixel against the level first, so the message names both.
@@ -415,7 +376,7 @@ void printPixel(std::ostream& out, unsigned level, const PixelCoordinates& p, co
     else header.insert(header.end(), {"R", "G", "B"});
     if (f.hasCounts()) header.push_back("count");
     Table table(header);
-    const std::vector<std::size_t> layers = vertexLayers(f);
+    const std::vector<std::size_t> layers = dsm::vertexLayers(f);
     for (std::size_t i = 0; i < f.size(); ++i) {
         // 7 digits: readable; --json gives the stored floats exactly.
         std::vector<std::string> row{std::to_string(i), std::to_string(layers[i]), num(f.z(i), 7)};
@@ -424,22 +385,6 @@ void printPixel(std::ostream& out, unsigned level, const PixelCoordinates& p, co
         table.add(std::move(row));
     }
     table.print(out, "    ");
-}
-
-Json pixelJson(unsigned level, const PixelCoordinates& p, const dsm::VisibilityView& f) {
-    Json vertices = Json::array();
-    const std::vector<std::size_t> layers = vertexLayers(f);
-    for (std::size_t i = 0; i < f.size(); ++i) {
-        Json value = Json::array();
-        for (int c = 0; c < f.channels(); ++c) value.push_back(f.value(i, c));
-        Json vertex{{"z", f.z(i)}, {"value", std::move(value)}};
-        if (f.hasCounts()) vertex["count"] = f.count(i);
-        vertex["layer"] = layers[i];
-        vertices.push_back(std::move(vertex));
-    }
-    return {{"level", level},           {"x", p.x},
-            {"y", p.y},                 {"channels", f.channels()},
-            {"layers", f.layerCount()}, {"vertices", std::move(vertices)}};
 }
 
 std::string bucketText(std::size_t k) {
@@ -514,8 +459,8 @@ void describeOne(const Options& o, const std::string& name, const dsm::DeepShado
 
     if (o.json) {
         json = Json::parse(dsm::mapInfoJson(info, name, -1));
-        if (tiles) json["tiles"] = tilesJson(*tiles);
-        if (pixel) json["pixel"] = pixelJson(pixelLevel, *o.pixel, pixel->view());
+        if (tiles) json["tiles"] = Json::parse(dsm::tilesJson(*tiles));
+        if (pixel) json["pixel"] = Json::parse(dsm::pixelFunctionJson(pixel->view(), pixelLevel, o.pixel->x, o.pixel->y));
         if (stats) json["stats"] = statsJson(*stats);
         return;
     }

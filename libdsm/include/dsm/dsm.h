@@ -16,6 +16,7 @@
 #include "dsm/reader.h"
 #include "dsm/shadow_system.h"
 #include "dsm/soft_shadow.h"
+#include "dsm/soft_shadow_image.h"
 #include "dsm/sweep.h"
 #include "dsm/tile_cache.h"
 #include "dsm/transmittance.h"

@@ -50,6 +50,37 @@ DSM_API FloatImage opacityImage(const DeepShadowMap& map, unsigned level);
 /// (exact as float up to 2^24). Same reading and failures as visibilitySlice().
 DSM_API FloatImage vertexCountImage(const DeepShadowMap& map, unsigned level);
 
+/// A rectangle of a level's pixels: [x, x + width) x [y, y + height).
+struct PixelRect {
+    std::uint32_t x = 0;
+    std::uint32_t y = 0;
+    std::uint32_t width = 0;
+    std::uint32_t height = 0;
+};
+
+/// Throws dsm::Error (argument) naming the file when `rect` is empty or
+/// reaches outside the level, or the level does not exist.
+DSM_API void checkPixelRect(const DeepShadowMap& map, unsigned level, const PixelRect& rect);
+
+/// The pictures above for the pixels of `rect` only (pixel (rect.x, rect.y)
+/// is the image's (0, 0)): reads only the tiles the rectangle meets, so a
+/// viewer fetches a huge level piece by piece. Besides the failures of the
+/// whole-level versions, throws dsm::Error (argument) naming the file when
+/// `rect` is empty or reaches outside the level.
+DSM_API FloatImage visibilitySlice(const DeepShadowMap& map, unsigned level, double z, const PixelRect& rect);
+DSM_API FloatImage opacityImage(const DeepShadowMap& map, unsigned level, const PixelRect& rect);
+DSM_API FloatImage vertexCountImage(const DeepShadowMap& map, unsigned level, const PixelRect& rect);
+
+/// Layers per pixel of `rect` (MTSM layers; 1 for a non-empty one-layer
+/// pixel, 0 for an empty one), as one channel. Same failures as above.
+DSM_API FloatImage layerCountImage(const DeepShadowMap& map, unsigned level, const PixelRect& rect);
+
+/// a - b per pixel and channel, for comparing two maps' pictures of the same
+/// size. A one-channel picture against a three-channel one is compared in
+/// each of the three channels. Throws dsm::Error (argument) when the sizes
+/// differ or the channel counts are neither equal nor 1 and 3.
+DSM_API FloatImage differenceImage(const FloatImage& a, const FloatImage& b);
+
 /// Distribution of vertices per pixel over every pixel of a level, empty
 /// pixels (0 vertices) included.
 struct VertexHistogram {
