@@ -191,13 +191,16 @@ struct SoftShadowContext::Impl {
         consumed = std::max(consumed, deepestHit);
     }
 
+    // A monochrome pixel's one value applies to each of the ray's channels:
+    // the ray may already carry colour from RGB pixels it crossed before.
     void attenuate(const VisibilityView& f, std::size_t i, std::size_t layerBegin, std::uint64_t hits,
                    std::uint64_t count) {
         const double share = static_cast<double>(hits) / static_cast<double>(count);
-        const int n = f.channels() == 1 ? 1 : 3;
-        for (int c = 0; c < n; ++c) {
-            const double before = i == layerBegin ? 1.0 : f.value(i - 1, c);
-            const double after = f.value(i, c);
+        const bool mono = f.channels() == 1;
+        for (int c = 0; c < 3; ++c) {
+            const int stored = mono ? 0 : c;
+            const double before = i == layerBegin ? 1.0 : f.value(i - 1, stored);
+            const double after = f.value(i, stored);
             auto& v = vis[c];
             if (attenuation == SampleAttenuation::Multiplicative) {
                 if (before <= 0.0) continue;  // nothing left to learn in this layer
@@ -207,7 +210,6 @@ struct SoftShadowContext::Impl {
                 v = std::max(0.0, v - (before - after) * share);
             }
         }
-        if (n == 1) vis[1] = vis[2] = vis[0];
     }
 
     // Every pixel the ray crosses, in order (Amanatides & Woo).
