@@ -48,15 +48,21 @@ TEST(AutomaticBias, ScalesWithDepthAndResolution) {
 TEST(AutomaticBias, SlopeFollowsTheNormalAgainstTheLightsRay) {
     const dsm::MapInfo info = perspectiveMap(256, 2.0);
     const double z = 10.0, floor = z / 16384.0, pixel = z / 256.0 * 2.0;
-    // At the raster centre the ray is +z.
-    EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{0.0, 0.0, -3.0}), floor);
+    // At the raster centre the ray is +z. A surface facing the light keeps
+    // the slope-1 bias; steeper ones get more, up to the cap.
+    EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{0.0, 0.0, -3.0}), floor + pixel);
+    EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{0.5, 0.0, 1.0}), floor + pixel);
     EXPECT_NEAR(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{1.0, 0.0, 1.0}), floor + pixel, 1e-12);
     EXPECT_NEAR(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{std::sqrt(3.0), 0.0, -1.0}),
                 floor + pixel * std::sqrt(3.0), 1e-12);
     EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{1.0, 0.0, 0.0}),
                      floor + pixel * dsm::kAutomaticBiasMaxSlope);
-    // Off the centre the ray tilts: raster x = 256 is screen x = 0.5.
-    EXPECT_NEAR(dsm::automaticBias(info, 256.0, 128.0, z, Vec3{0.5, 0.0, 1.0}), floor, 1e-12);
+    // Off the centre the ray tilts: raster x = 256 is screen x = 0.5, so a
+    // normal (1, 0, -0.5) is perpendicular to it (the surface is edge-on).
+    EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 256.0, 128.0, z, Vec3{1.0, 0.0, -0.5}),
+                     floor + pixel * dsm::kAutomaticBiasMaxSlope);
+    // There a normal along x is at atan(2) from the ray (at the centre it is edge-on).
+    EXPECT_NEAR(dsm::automaticBias(info, 256.0, 128.0, z, Vec3{1.0, 0.0, 0.0}), floor + 2.0 * pixel, 1e-12);
     // A zero or non-finite normal counts as none.
     EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{0.0, 0.0, 0.0}), floor + pixel);
     EXPECT_DOUBLE_EQ(dsm::automaticBias(info, 128.0, 128.0, z, Vec3{NAN, 0.0, 1.0}), floor + pixel);

@@ -10,7 +10,11 @@ namespace {
 constexpr double kDepthPrecision = 1.0 / 16384.0;  // 2^-14
 
 // The surface's depth slope along the light's ray: tan of the angle between
-// the normal and the ray, capped; 1 without a usable normal.
+// the normal and the ray, in [1, max]; 1 without a usable normal. Not below 1:
+// a surface facing the light still meets rays leaving it at up to the light's
+// angle, curves away within the filter's reach and, blurred by motion, spreads
+// its depths; a smaller floor made the examples' mean errors 1.6-2.6 times
+// the best constant bias's.
 double slope(const MapInfo& info, double rx, double ry, const std::optional<Vec3>& n) {
     if (!n) return 1.0;
     const Vec3& v = *n;
@@ -27,7 +31,8 @@ double slope(const MapInfo& info, double rx, double ry, const std::optional<Vec3
     const double x = v[1] * ray[2] - v[2] * ray[1], y = v[2] * ray[0] - v[0] * ray[2],
                  z = v[0] * ray[1] - v[1] * ray[0];
     const double s = std::sqrt(x * x + y * y + z * z);
-    return s >= kAutomaticBiasMaxSlope * c ? kAutomaticBiasMaxSlope : s / c;
+    if (s >= kAutomaticBiasMaxSlope * c) return kAutomaticBiasMaxSlope;
+    return std::max(1.0, s / c);
 }
 
 }  // namespace

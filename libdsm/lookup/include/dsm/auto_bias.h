@@ -31,8 +31,11 @@ constexpr double kAutomaticBiasMaxSlope = 10.0;
 ///    lookup (or a ray leaving the receiver) reads pixels up to one pixel
 ///    away, so the receiver's own surface reaches it from that far.
 ///  - t: the surface's depth slope, the tangent of the angle between its
-///    normal and the light's ray through (rx, ry), at most
-///    kAutomaticBiasMaxSlope; 1 (a surface at 45 degrees) without a normal.
+///    normal and the light's ray through (rx, ry), in [1,
+///    kAutomaticBiasMaxSlope]; 1 (a surface at 45 degrees) without a normal.
+///    So a normal raises the bias of surfaces the light grazes and never
+///    lowers it (rays leave a receiver at up to the area light's angle, and
+///    filtered, curved or motion-blurred surfaces spread their depths).
 ///  - z 2^-14: depths are stored as 32-bit floats, and a receiver computed
 ///    from other geometry than the map's rounds differently.
 ///
