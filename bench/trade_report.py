@@ -51,6 +51,11 @@ def table(header, rows):
     return "\n".join(out)
 
 
+
+def bias_text(bias):
+    """A bias as the report shows it: a number, or "auto" (negative or a string in the JSON)."""
+    return "auto" if isinstance(bias, str) or bias < 0 else f"{bias:.3g}"
+
 class Report:
     def __init__(self, data, plots_dir, md_dir):
         self.d = data
@@ -252,7 +257,7 @@ class Report:
             m = sc["map"]
             self.add(f"### {sc['scene']} (map {m['resolution']}², {m['spp']} spp, {m['layers']} layers, "
                      f"{kib(m['file_bytes'])} KiB; image {sc['image']['width']}×{sc['image']['height']}; "
-                     f"bias {sc['bias']:.3g}, z threshold {sc['z_threshold']:.3g})", "")
+                     f"bias {bias_text(sc['bias'])}, z threshold {sc['z_threshold']:.3g})", "")
             body = []
             for r in sc["rows"]:
                 me, pe = r["mtsm_error"], r["pcf_error"]
@@ -280,12 +285,24 @@ class Report:
                 self.add(table(["map", "walk pixels/ray", "walk µs/ray", "hierarchy pixels/ray", "hierarchy nodes/ray",
                                 "hierarchy µs/ray", "walk / hierarchy time"], body), "")
             if "knobs" in sc:
-                body = [[k["knob"], f"{k['value']:.4g}", k["samples"], k["layers"] or "all", f"{k['bias']:.3g}",
+                body = [[k["knob"], f"{k['value']:.4g}", k["samples"], k["layers"] or "all", bias_text(k["bias"]),
                          f"{k['error']['mean']:.4f} ± {k['error']['stddev']:.4f}", f"{k['mtsm_seconds']:.2f}",
                          f"{k['reference_seconds'] / k['mtsm_seconds']:.1f}"] for k in sc["knobs"]]
                 self.add("The knobs at the medium light (one changed at a time from the defaults above):", "")
                 self.add(table(["knob", "value", "N", "K", "bias", "MTSM error", "MTSM s", "reference / MTSM time"],
                                body), "")
+            if "bias_study" in sc:
+                b = sc["bias_study"]
+                self.add("The automatic bias against constants (medium light, 64 rays; the reference's fully lit "
+                         f"receivers, {b['lit_receivers']}, that read below 0.9 count as self-shadowed):", "")
+                body = [[f"{c['bias']:.4g}", f"{c['error']['mean']:.4f} ± {c['error']['stddev']:.4f}",
+                         f"{c['error']['mean'] / b['best_error']:.2f}", c["lit_but_dark"]] for c in b["constants"]]
+                for key, label in (("auto", "auto"), ("auto_normals", "auto + normals")):
+                    a = b[key]
+                    body.append([f"**{label}**", f"{a['error']['mean']:.4f} ± {a['error']['stddev']:.4f}",
+                                 f"**{a['ratio_to_best']:.2f}**", a["lit_but_dark"]])
+                self.add(table(["bias", "MTSM error", "error / best constant's", "lit receivers below 0.9"], body),
+                         "")
 
     def cache_budget(self):
         s = self.d["cache_budget"]

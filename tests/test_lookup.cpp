@@ -37,6 +37,14 @@ using dsm::test::Image;
 using dsm::test::TempDir;
 
 constexpr double kTight = 1e-12;  // same formulas, possibly another summation order
+
+// Options that look up the queried depth itself (no bias): the tests below
+// check the filters against the stored functions at that depth.
+LookupOptions atTheDepth() {
+    LookupOptions o;
+    o.bias = 0.0;
+    return o;
+}
 constexpr double kPi = 3.14159265358979323846;
 
 double minimumWidth(PixelFilter f) { return f == PixelFilter::Box ? 1.0 : 2.0; }
@@ -154,7 +162,7 @@ Reference referenceLookup(const DeepShadowMap& map, const LookupOptions& o, doub
         r.level1 = std::min(r.level0 + 1, coarsest);
         r.blend = r.level1 == r.level0 ? 0.0 : lambda - std::floor(lambda);
     }
-    const double zq = z - o.bias;
+    const double zq = z - (o.bias ? *o.bias : dsm::automaticBias(map.info(), rx, ry, z, o.normal));
     const auto levelWidth = [&](unsigned l) { return std::max(width * std::ldexp(1.0, -static_cast<int>(l)), minW); };
     const Filtered a = filterStored(map, r.level0, o.filter, levelWidth(r.level0), rx, ry, zq);
     r.used = a.used;
@@ -282,7 +290,7 @@ TEST(LookupLevelZero, BoxOfWidthOneIsBilinearBetweenTheFourNearestCentres) {
             }
         for (double& s : sum) s /= total;
         for (PixelFilter f : {PixelFilter::Box, PixelFilter::Triangle}) {
-            LookupOptions o;
+            LookupOptions o = atTheDepth();
             o.filter = f;
             o.filterWidth = f == PixelFilter::Box ? 1.0 : 2.0;  // both documented as bilinear
             o.level = 0;
@@ -307,7 +315,7 @@ TEST(LookupLevelZero, HugeFootprintsCoverTheImageWithoutBlowingUp) {
         for (std::uint32_t x = 0; x < 23; ++x)
             for (int c = 0; c < 3; ++c) mean[static_cast<std::size_t>(c)] += ref.value(x, y, z, c) / (23.0 * 17.0);
     for (double width : {1e4, 1e9, 1e300}) {
-        LookupOptions o;
+        LookupOptions o = atTheDepth();
         o.filterWidth = width;
         o.level = 0;
         const LookupResult r = ctx.raster(11.0, 8.0, z, o);
@@ -332,7 +340,7 @@ TEST(LookupLevelZero, KernelsMatchTheDocumentedFormulasAtSeveralWidths) {
         for (double w : ws) {
             for (const auto& [rx, ry] : queryPoints(23, 17, rng, 40)) {
                 const double z = depth(rng);
-                LookupOptions o;
+                LookupOptions o = atTheDepth();
                 o.filter = filter;
                 o.filterWidth = w;
                 o.level = 0;
@@ -359,7 +367,7 @@ TEST(LookupLevels, ForcedAndAutomaticLevelsFollowTheDocumentedSelection) {
             for (double w : {1.0, 1.5, 2.0, 3.0, 4.0, 6.0, 8.0, 12.5, 40.0, 300.0}) {
                 for (const auto& [rx, ry] : queryPoints(23, 17, rng, 4)) {
                     const double z = depth(rng);
-                    LookupOptions o;
+                    LookupOptions o = atTheDepth();
                     o.filter = filter;
                     o.filterWidth = w;
                     o.level = levelOption(level);
@@ -390,7 +398,7 @@ TEST(LookupLevels, ErrorBoundNamesTheLevelsUsed) {
     ASSERT_EQ(levels.size(), 8u);
     // Bounds strictly increase with the level (the tolerance is > 2^-25).
     for (std::size_t l = 1; l < levels.size(); ++l) EXPECT_GT(levels[l].errorBound, levels[l - 1].errorBound);
-    LookupOptions o;
+    LookupOptions o = atTheDepth();
     for (int l = 0; l < 8; ++l) {
         o.level = l;
         EXPECT_EQ(ctx.raster(20.3, 17.9, 2.0, o).errorBound, levels[l].errorBound) << "level " << l;
@@ -445,7 +453,7 @@ void checkAutomaticAgainstLevelZero(const OpenMap& m, double maxMeanSlack) {
         for (double w : {1.0, 2.0, 3.0, 4.5, 6.0, 8.0}) {
             for (const auto& [rx, ry] : queryPoints(m.image.width, m.image.height, rng, 25)) {
                 const double z = depth(rng);
-                LookupOptions o;
+                LookupOptions o = atTheDepth();
                 o.filter = filter;
                 o.filterWidth = w;
                 const Reference sel = referenceLookup(*m.map, o, rx, ry, z);
@@ -512,7 +520,7 @@ TEST(LookupSpace, PointsOutsideTheMapAreLit) {
         for (PixelFilter f : {PixelFilter::Box, PixelFilter::Triangle, PixelFilter::Gaussian}) {
             for (double w : {1.0, 3.0, 9.0}) {
                 for (int level : {-1, 0, 2}) {
-                    LookupOptions o;
+                    LookupOptions o = atTheDepth();
                     o.filter = f;
                     o.filterWidth = w;
                     o.level = levelOption(level);
@@ -542,7 +550,7 @@ TEST(LookupChannels, MonochromeMapsAndMonochromePixelsReplicate) {
     const auto m = writeAndOpen(image, o);
     const LevelZero ref(m->image);
     LookupContext ctx(m->map);
-    LookupOptions lo;
+    LookupOptions lo = atTheDepth();
     lo.level = 0;
     bool distinct = false;
     for (double z = 0.25; z < 6.0; z += 0.25) {
@@ -565,7 +573,7 @@ TEST(LookupChannels, MonochromeMapsAndMonochromePixelsReplicate) {
     const auto mm = smoothMonoMap();
     LookupContext mctx(mm->map);
     for (double z = 0.5; z < 6.0; z += 0.5) {
-        const LookupResult r = mctx.raster(30.2, 20.7, z, {});
+        const LookupResult r = mctx.raster(30.2, 20.7, z, atTheDepth());
         EXPECT_EQ(r.channels, 1);
         EXPECT_EQ(r.v[1], r.v[0]);
         EXPECT_EQ(r.v[2], r.v[0]);
@@ -632,7 +640,7 @@ TEST(LookupSpace, WorldAndLightAgreeWithRasterForBothProjections) {
             ASSERT_NEAR(by, ry, 1e-9);
             ASSERT_NEAR(bz, z, 1e-9);
             for (double w : {1.0, 3.0}) {
-                LookupOptions lo;
+                LookupOptions lo = atTheDepth();
                 lo.filterWidth = w;
                 lo.filter = PixelFilter::Triangle;
                 const LookupResult r = ctx.raster(rx, ry, z, lo);
@@ -675,6 +683,7 @@ TEST(LookupBias, BiasShiftsTheQueryDepth) {
         const double rx = ux(rng), ry = uy(rng), z = uz(rng), bias = ub(rng);
         LookupOptions biased, plain;
         biased.bias = bias;
+        plain.bias = 0.0;
         biased.filterWidth = plain.filterWidth = 2.5;
         const LookupResult a = ctx.raster(rx, ry, z, biased);
         const LookupResult b = ctx.raster(rx, ry, z - bias, plain);
@@ -694,6 +703,7 @@ TEST(LookupBias, BiasShiftsTheQueryDepth) {
     const VisibilityFunction& f = m->image.at(10, 10);
     LookupOptions atCentre;
     atCentre.level = 0;
+    atCentre.bias = 0.0;
     EXPECT_LT(ctx.raster(10.5, 10.5, f.z(2), atCentre).v[0], 1.0);
     atCentre.bias = f.z(2);
     EXPECT_EQ(ctx.raster(10.5, 10.5, f.z(2), atCentre).v[0], 1.0);

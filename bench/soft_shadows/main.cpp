@@ -9,7 +9,9 @@
 // sweep of the knobs (layers K, bias, samples N) on the first two scenes. Writes
 // JSON for bench/trade_report.py and one contact sheet per scene (PNG).
 //
-//   bench_soft_shadows --out FILE.json --images DIR [--smoke] [--scenes A,B] [--threads T]
+//   bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] [--scenes A,B] [--threads T]
+//
+// --bias-study runs only the automatic bias against constant biases.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -43,6 +45,7 @@ using dsm::Vec3;
 
 struct Config {
     bool smoke = false;
+    bool biasStudyOnly = false;  // --bias-study: only the automatic bias against constants
     std::vector<std::string> scenes;
     std::uint32_t mapResolution = 256, mapSpp = 16;
     int mapLayers = 4;
@@ -82,6 +85,7 @@ double seconds(std::chrono::steady_clock::time_point start) {
 struct Receivers {
     std::uint32_t width = 0, height = 0;
     std::vector<Vec3> points;
+    std::vector<Vec3> normals;  // of the surface each point lies on (facing the camera)
     std::vector<char> valid;
 };
 
@@ -108,6 +112,7 @@ Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tra
     r.width = config.imageWidth;
     r.height = config.imageHeight;
     r.points.resize(std::size_t(r.width) * r.height);
+    r.normals.resize(r.points.size());
     r.valid.assign(r.points.size(), 0);
     const double aspect = double(r.width) / r.height;
     for (std::uint32_t y = 0; y < r.height; ++y)
@@ -120,6 +125,7 @@ Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tra
             // Off the surface, towards the camera, so neither tracer sees the
             // receiver's own surface.
             r.points[std::size_t(y) * r.width + x] = add(h->position, mul(h->normal, 1e-4 * distance));
+            r.normals[std::size_t(y) * r.width + x] = h->normal;
             r.valid[std::size_t(y) * r.width + x] = 1;
         }
     return r;
@@ -132,14 +138,17 @@ struct Frame {
 
 enum class Method { Mtsm, Pcf, Reference };
 
+/// With `withNormals`, each MTSM query passes its receiver's normal to the
+/// automatic bias.
 Frame render(Method method, const Receivers& r, const std::shared_ptr<const dsm::SoftShadowTracer>& tracer,
              const dsm::ReferenceTracer& reference, const dsm::AreaLight& light, const dsm::SoftShadowOptions& o,
-             unsigned threads) {
+             unsigned threads, bool withNormals = false) {
     Frame f;
     f.v.assign(r.points.size(), -1.0f);
     const auto start = std::chrono::steady_clock::now();
     parallelRows(r.height, threads, [&](std::uint32_t y) {
         dsm::SoftShadowContext context(tracer);
+        dsm::SoftShadowOptions own = o;
         std::vector<Vec3> samples;
         for (std::uint32_t x = 0; x < r.width; ++x) {
             const std::size_t i = std::size_t(y) * r.width + x;
@@ -147,7 +156,8 @@ Frame render(Method method, const Receivers& r, const std::shared_ptr<const dsm:
             const Vec3& p = r.points[i];
             double v = 1.0;
             if (method == Method::Mtsm) {
-                v = context.visibility(p, o).v[0];
+                if (withNormals) own.normal = r.normals[i];
+                v = context.visibility(p, own).v[0];
             } else if (method == Method::Pcf) {
                 v = context.pcfVisibility(p, o).v[0];
             } else {
@@ -274,6 +284,54 @@ Json hierarchyScaling(const Config& config, const dsm::Scene& sceneIn, const Rec
     return rows;
 }
 
+/// The automatic bias against hand-tuned constants (medium light, 64 rays):
+/// the mean error of constant biases from 0.0005 to 0.5 times the scene's
+/// scale, and of the automatic bias with and without the receivers' normals;
+/// and the receivers the reference sees fully lit that read below 0.9
+/// (self-shadowing).
+Json biasStudy(const Config& config, const std::shared_ptr<const dsm::DeepShadowMap>& map, const Receivers& receivers,
+               const dsm::ReferenceTracer& reference, double radius, double planeDepth, double scale,
+               const dsm::SoftShadowOptions& base, const std::string& name) {
+    const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radius, planeDepth);
+    const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+    dsm::SoftShadowOptions o = base;
+    o.samples = 64;
+    const Frame ref = render(Method::Reference, receivers, tracer, reference, light, o, config.threads);
+    auto litButDark = [&](const Frame& f) {
+        std::size_t n = 0;
+        for (std::size_t i = 0; i < f.v.size(); ++i) n += ref.v[i] >= 1.0f && f.v[i] >= 0.0f && f.v[i] < 0.9f;
+        return n;
+    };
+    std::size_t lit = 0;
+    for (const float v : ref.v) lit += v >= 1.0f;
+    Json constants = Json::array();
+    double best = 1e300, bestBias = 0.0;
+    for (const double f : {0.0005, 0.001, 0.002, 0.004, 0.008, 0.015, 0.03, 0.06, 0.125, 0.25, 0.5}) {
+        o.bias = f * scale;
+        const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads);
+        const Difference d = difference(mtsm, ref);
+        constants.push_back({{"bias", *o.bias}, {"error", toJson(d)}, {"lit_but_dark", litButDark(mtsm)}});
+        if (d.mean < best) {
+            best = d.mean;
+            bestBias = *o.bias;
+        }
+    }
+    Json out{{"constants", constants}, {"best_bias", bestBias}, {"best_error", best}, {"lit_receivers", lit}};
+    o.bias.reset();
+    for (const bool normals : {false, true}) {
+        const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads, normals);
+        const Difference d = difference(mtsm, ref);
+        out[normals ? "auto_normals" : "auto"] = {
+            {"error", toJson(d)}, {"ratio_to_best", d.mean / best}, {"lit_but_dark", litButDark(mtsm)}};
+        std::printf("  %s bias: best constant %.4g err %.4f | auto%s err %.4f (x%.3f of best), %zu of %zu lit "
+                    "receivers below 0.9\n",
+                    name.c_str(), bestBias, best, normals ? "+normals" : "", d.mean, d.mean / best, litButDark(mtsm),
+                    lit);
+    }
+    std::fflush(stdout);
+    return out;
+}
+
 Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bool scaling) {
     const std::string name = stem(file);
     dsm::Scene scene = dsm::loadScene(file);
@@ -306,13 +364,15 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
                   {"build_seconds", built.wallSeconds}};
     out["image"] = {{"width", receivers.width}, {"height", receivers.height}};
     dsm::SoftShadowOptions base;
-    // Against self-shadowing of surfaces whose depth varies across a filtered
-    // pixel (the ground seen obliquely; see the bias knob below).
-    base.bias = 0.015 * scale;
+    // The bias is automatic (dsm/auto_bias.h): see the bias study below.
     base.zThreshold = 0.003 * scale;
-    out["bias"] = base.bias;
+    out["bias"] = "auto";
     out["z_threshold"] = base.zThreshold;
 
+    if (config.biasStudyOnly) {
+        out["bias_study"] = biasStudy(config, map, receivers, reference, radii[1], planeDepth, scale, base, name);
+        return out;
+    }
     const std::uint32_t w = receivers.width, h = receivers.height;
     dsm::FloatImage sheet((w + 4) * 5, (h + 4) * 3, 3, 0.0f);
     Json rows = Json::array();
@@ -365,7 +425,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
                              {"value", value},
                              {"samples", o.samples},
                              {"layers", o.layers.value_or(0)},  // 0: all of the map's layers
-                             {"bias", o.bias},
+                             {"bias", o.bias.value_or(-1.0)},  // -1: automatic
                              {"mtsm_seconds", mtsm.seconds},
                              {"reference_seconds", ref.seconds},
                              {"error", toJson(d)}});
@@ -380,8 +440,8 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
         }
         for (const double f : {0.25, 1.0, 4.0}) {
             dsm::SoftShadowOptions o = base;
-            o.bias = base.bias * f;
-            measure("bias", o.bias, o);
+            o.bias = 0.015 * scale * f;
+            measure("bias", *o.bias, o);
         }
         for (const int n : {16, 64, 256}) {
             dsm::SoftShadowOptions o = base;
@@ -390,6 +450,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
         }
         out["knobs"] = std::move(knobs);
     }
+    out["bias_study"] = biasStudy(config, map, receivers, reference, radii[1], planeDepth, scale, base, name);
     if (scaling) out["scaling"] = hierarchyScaling(config, scene, receivers, radii[1], base, name);
     return out;
 }
@@ -413,13 +474,14 @@ int main(int argc, char** argv) {
         const std::string a = argv[i];
         const bool hasValue = i + 1 < argc;
         if (a == "--smoke") config.smoke = true;
+        else if (a == "--bias-study") config.biasStudyOnly = true;
         else if (a == "--out" && hasValue) outPath = argv[++i];
         else if (a == "--images" && hasValue) config.images = argv[++i];
         else if (a == "--scenes" && hasValue) scenes = argv[++i];
         else if (a == "--threads" && hasValue) config.threads = static_cast<unsigned>(std::stoul(argv[++i]));
         else {
-            std::fprintf(stderr, "usage: bench_soft_shadows --out FILE.json --images DIR [--smoke] [--scenes A,B] "
-                                 "[--threads T]\n");
+            std::fprintf(stderr, "usage: bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] "
+                                 "[--scenes A,B] [--threads T]\n");
             return 2;
         }
     }

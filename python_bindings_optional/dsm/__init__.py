@@ -97,14 +97,15 @@ class Map:
         return self._map.pixel(int(x), int(y), int(level))
 
     def lookup(self, points, space: str = "world", filter_width: float = 1.0, filter: str = "box",
-               level: Union[str, int] = "auto", bias: float = 0.0, error_bound: bool = False,
+               level: Union[str, int] = "auto", bias: Union[str, float] = "auto", error_bound: bool = False,
                threads: int = 0):
         """Filtered visibility at each row (x, y, z) of an (N, 3) array.
 
         space: "world", "light" or "raster" (level-0 pixels, light depth).
         filter_width: in level-0 pixels; filter: "box", "triangle", "gaussian";
         level: "auto" (trilinear mip-mapping) or a level number; bias is
-        subtracted from the depth. Returns an (N,) array for a monochrome map,
+        subtracted from the depth: "auto" (a map pixel's depth footprint at
+        the point's depth, dsm/auto_bias.h) or a number. Returns an (N,) array for a monochrome map,
         (N, 3) for RGB; with error_bound=True a tuple (values, bounds).
         threads: 0 = all cores; more than the cores are clamped to them. Each
         thread looks up its share of the points in one batch (tile by tile,
@@ -112,11 +113,11 @@ class Map:
         up raises Error with the reason.
         """
         values, bounds = self._map.lookup(np.asarray(points, dtype=np.float64), space, filter, float(filter_width),
-                                          level, float(bias), int(threads))
+                                          level, bias if isinstance(bias, str) else float(bias), int(threads))
         return (values, bounds) if error_bound else values
 
-    def soft_shadow(self, points, light: str, samples: int = 64, layers: int = 0, bias: float = 0.0,
-                    z_threshold: float = 0.0, seed: int = 1, method: str = "mtsm", threads: int = 0):
+    def soft_shadow(self, points, light: str, samples: int = 64, layers: int = 0, bias: Union[str, float] = "auto",
+                    z_threshold: float = 0.0, seed: int = 1, method: str = "mtsm", normals=None, threads: int = 0):
         """Fraction of an area light visible from each world point of an
         (N, 3) array, like ``dsm-lookup --area-light``.
 
@@ -125,11 +126,17 @@ class Map:
         light's area_radius and mtsm_layers > 1). method: "mtsm" traces
         `samples` rays per point through the map as a multilayer transparent
         shadow map (layers K: 0 = all; z_threshold and bias in light depth
-        units); "pcf" is the classic filtered-lookup baseline. Returns (N,) or
+        units); "pcf" is the classic filtered-lookup baseline. bias: "auto"
+        (z_threshold plus a map pixel's depth footprint at the receiver,
+        slope-scaled by the receiver's world normal, a row of the (N, 3)
+        array `normals`, when given) or a number >= 0. Returns (N,) or
         (N, 3) like lookup(). Deterministic for a seed.
         """
         return self._map.soft_shadow(np.asarray(points, dtype=np.float64), str(light), int(samples), int(layers),
-                                     float(bias), float(z_threshold), int(seed), str(method), int(threads))
+                                     bias if isinstance(bias, str) else float(bias), float(z_threshold), int(seed),
+                                     str(method),
+                                     None if normals is None else np.asarray(normals, dtype=np.float64),
+                                     int(threads))
 
     def cache_stats(self) -> dict:
         """Counters of the tile cache this map reads through."""

@@ -1,6 +1,6 @@
 # Typing information for the dsm package (libdsm's Python bindings), for help() and editors.
 import os
-from typing import Any, Literal, Mapping, Union, overload
+from typing import Any, Literal, Mapping, Optional, Union, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -37,14 +37,15 @@ class Map:
     def pixel(self, x: int, y: int, level: int = ...) -> np.ndarray: ...
     @overload
     def lookup(self, points: npt.ArrayLike, space: _Space = ..., filter_width: float = ..., filter: _Filter = ...,
-               level: Union[Literal["auto"], int] = ..., bias: float = ..., error_bound: Literal[False] = ...,
+               level: Union[Literal["auto"], int] = ..., bias: Union[Literal["auto"], float] = ..., error_bound: Literal[False] = ...,
                threads: int = ...) -> npt.NDArray[np.float64]: ...
     @overload
     def lookup(self, points: npt.ArrayLike, space: _Space = ..., filter_width: float = ..., filter: _Filter = ...,
-               level: Union[Literal["auto"], int] = ..., bias: float = ..., *, error_bound: Literal[True],
+               level: Union[Literal["auto"], int] = ..., bias: Union[Literal["auto"], float] = ..., *, error_bound: Literal[True],
                threads: int = ...) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
-    def soft_shadow(self, points: npt.ArrayLike, light: str, samples: int = ..., layers: int = ..., bias: float = ...,
-                    z_threshold: float = ..., seed: int = ..., method: Literal["mtsm", "pcf"] = ...,
+    def soft_shadow(self, points: npt.ArrayLike, light: str, samples: int = ..., layers: int = ...,
+                    bias: Union[Literal["auto"], float] = ..., z_threshold: float = ..., seed: int = ...,
+                    method: Literal["mtsm", "pcf"] = ..., normals: Optional[npt.ArrayLike] = ...,
                     threads: int = ...) -> npt.NDArray[np.float64]: ...
     def cache_stats(self) -> dict[str, int]: ...
 

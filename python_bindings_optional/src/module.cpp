@@ -65,6 +65,15 @@ using PointArray = py::array_t<double, py::array::c_style | py::array::forcecast
 using Point = std::array<double, 3>;
 
 /// The rows of an (N, 3) array, copied out while the GIL is held.
+/// "auto" (unset: the automatic bias) or a number.
+std::optional<double> parseBias(const py::object& bias) {
+    if (py::isinstance<py::str>(bias)) {
+        if (bias.cast<std::string>() == "auto") return std::nullopt;
+        throw py::value_error("bias must be 'auto' or a number");
+    }
+    return bias.cast<double>();
+}
+
 std::vector<Point> pointRows(const PointArray& points) {
     if (points.ndim() != 2 || points.shape(1) != 3) throw py::value_error("points must be an array of shape (N, 3)");
     std::vector<Point> rows(static_cast<std::size_t>(points.shape(0)));
@@ -209,13 +218,13 @@ public:
     /// Filtered lookups of an (N, 3) array. Returns (values, bounds): values
     /// shape (N,) for a monochrome map, (N, 3) for RGB; bounds shape (N,).
     py::tuple lookup(const PointArray& points, const std::string& space, const std::string& filter, double filterWidth,
-                     const py::object& level, double bias, int threads) const {
+                     const py::object& level, const py::object& bias, int threads) const {
         const std::vector<Point> input = pointRows(points);
         dsm::LookupOptions options;
         options.filter = parseFilter(filter);
         options.filterWidth = filterWidth;
         options.level = parseLevel(level);
-        options.bias = bias;
+        options.bias = parseBias(bias);
         const dsm::LookupSpace where = parseSpace(space);
         const std::size_t n = input.size();
         const int channels = info().channels;
@@ -247,15 +256,19 @@ public:
     /// of the map, or the PCF baseline. `light` is "disk:R" or "rect:W,H"
     /// (full sizes). Returns values shaped like lookup()'s.
     py::array_t<double> softShadow(const PointArray& points, const std::string& light, int samples, int layers,
-                                   double bias, double zThreshold, std::uint64_t seed, const std::string& method,
+                                   const py::object& bias, double zThreshold, std::uint64_t seed,
+                                   const std::string& method, const std::optional<PointArray>& normals,
                                    int threads) const {
         const std::vector<Point> input = pointRows(points);
+        const std::vector<Point> normalRows = normals ? pointRows(*normals) : std::vector<Point>{};
+        if (normals && normalRows.size() != input.size())
+            throw py::value_error("normals must have one row per point");
         if (method != "mtsm" && method != "pcf") throw py::value_error("method must be 'mtsm' or 'pcf'");
         const dsm::AreaLight area = parseLight(light);
         dsm::SoftShadowOptions options;
         options.samples = samples;
         if (layers != 0) options.layers = layers;  // 0: all of the map's layers
-        options.bias = bias;
+        options.bias = parseBias(bias);
         options.zThreshold = zThreshold;
         options.seed = seed;
         const bool pcf = method == "pcf";
@@ -268,9 +281,11 @@ public:
             parallelChunks(n, workerCount(threads, n * static_cast<std::size_t>(std::max(1, samples))),
                            [&](std::size_t begin, std::size_t end) {
                 dsm::SoftShadowContext context(tracer);
+                dsm::SoftShadowOptions own = options;
                 for (std::size_t i = begin; i < end; ++i) {
+                    if (!normalRows.empty()) own.normal = normalRows[i];
                     const dsm::SoftShadowResult r =
-                        pcf ? context.pcfVisibility(input[i], options) : context.visibility(input[i], options);
+                        pcf ? context.pcfVisibility(input[i], own) : context.visibility(input[i], own);
                     for (int c = 0; c < channels; ++c) values[i * channels + c] = r.v[c];
                 }
             });
@@ -404,7 +419,7 @@ PYBIND11_MODULE(_dsm, m) {
              py::arg("level"), py::arg("bias"), py::arg("threads"))
         .def("soft_shadow", &Map::softShadow, py::arg("points"), py::arg("light"), py::arg("samples"),
              py::arg("layers"), py::arg("bias"), py::arg("z_threshold"), py::arg("seed"), py::arg("method"),
-             py::arg("threads"))
+             py::arg("normals"), py::arg("threads"))
         .def("cache_stats", &Map::cacheStats);
 
     m.def("build", &build, py::arg("scene_text"), py::arg("base_directory"), py::arg("scene_name"),

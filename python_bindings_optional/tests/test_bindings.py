@@ -59,7 +59,7 @@ def test_lookup_matches_single_point_evaluation_of_the_pixel(cards_map):
     f = m.pixel(10, 20)
     depths = np.linspace(0.0, float(f["z"][-1]) * 1.2 + 1.0, 57)
     points = np.column_stack([np.full_like(depths, 10.5), np.full_like(depths, 20.5), depths])
-    got = m.lookup(points, space="raster", filter_width=1.0, filter="box", level=0)
+    got = m.lookup(points, space="raster", filter_width=1.0, filter="box", level=0, bias=0.0)
     expected = np.interp(depths, f["z"].astype(np.float64), f["v"].astype(np.float64), left=1.0)
     # np.interp is left-continuous at steps; compare away from vertex depths.
     away = np.min(np.abs(depths[:, None] - f["z"][None, :]), axis=1) > 1e-4
@@ -180,3 +180,18 @@ def test_example_script_writes_a_png(tmp_path):
     subprocess.run([sys.executable, str(script), "--resolution", "32", "--spp", "1", "-o", str(out)], check=True,
                    env=env, capture_output=True)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bias_is_automatic_unless_a_number_is_given(cards_map):
+    m = dsm.open(cards_map)
+    f = m.pixel(10, 20)
+    z = float(f["z"][0])  # the first surface's own depth: half shadowed without a bias
+    point = np.array([[10.5, 20.5, z]])
+    automatic = m.lookup(point, space="raster", level=0)
+    assert np.array_equal(automatic, m.lookup(point, space="raster", level=0, bias="auto"))
+    assert np.array_equal(m.lookup(point, space="raster", level=0, bias=z),
+                          m.lookup(np.array([[10.5, 20.5, 0.0]]), space="raster", level=0, bias=0.0))
+    # The automatic bias is larger than none: the point reads at least as lit.
+    assert np.all(automatic >= m.lookup(point, space="raster", level=0, bias=0.0))
+    with pytest.raises(ValueError):
+        m.lookup(point, space="raster", bias="sometimes")

@@ -60,3 +60,17 @@ def test_bad_lights_are_errors(square_map):
         square_map.soft_shadow(receivers(), light="disk:1", method="exact")
     with pytest.raises(dsm.Error):
         square_map.soft_shadow(receivers(), light="disk:5")  # larger than the map was built for
+
+
+def test_automatic_bias_by_default_and_with_normals(square_map):
+    pts = receivers()
+    automatic = square_map.soft_shadow(pts, light="disk:1", samples=64)
+    assert np.array_equal(automatic, square_map.soft_shadow(pts, light="disk:1", samples=64, bias="auto"))
+    assert automatic[0] < 0.05 and automatic[-1] == 1.0  # the umbra stays dark, the lit ground lit
+    up = np.tile([0.0, 1.0, 0.0], (len(pts), 1))
+    with_normals = square_map.soft_shadow(pts, light="disk:1", samples=64, normals=up)
+    assert with_normals[0] < 0.05 and with_normals[-1] == 1.0
+    with pytest.raises(ValueError):
+        square_map.soft_shadow(pts, light="disk:1", normals=up[:2])
+    with pytest.raises(ValueError):
+        square_map.soft_shadow(pts, light="disk:1", bias="never")

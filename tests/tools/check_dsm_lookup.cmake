@@ -30,14 +30,33 @@ endforeach()
 
 include("${CMAKE_CURRENT_LIST_DIR}/check_common.cmake")
 
+# at_the_depth(out args...): the args, plus --bias 0 for a point lookup that
+# gives no --bias. The checks compare answers at the queried depth itself;
+# the default automatic bias has its own check (auto_bias).
+function(at_the_depth out)
+  set(args ${ARGN})
+  set(given FALSE)
+  foreach(a IN LISTS args)
+    if(a MATCHES "^(--bias|-b|--area-light|--help|--version)" OR a STREQUAL "-h")
+      set(given TRUE)
+    endif()
+  endforeach()
+  if(NOT given)
+    list(APPEND args --bias 0)
+  endif()
+  set(${out} "${args}" PARENT_SCOPE)
+endfunction()
+
 # run(args...): runs dsm-lookup; sets RC, OUT, ERR and LAST_COMMAND in the caller.
 function(run)
-  run_tool("${DSM_LOOKUP}" dsm-lookup ${ARGN})
+  at_the_depth(args ${ARGN})
+  run_tool("${DSM_LOOKUP}" dsm-lookup ${args})
 endfunction()
 
 # run_with_input(file args...): the same with standard input from a file.
 function(run_with_input input)
-  execute_process(COMMAND "${DSM_LOOKUP}" ${ARGN} INPUT_FILE "${input}"
+  at_the_depth(args ${ARGN})
+  execute_process(COMMAND "${DSM_LOOKUP}" ${args} INPUT_FILE "${input}"
     RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
   set(RC "${rc}" PARENT_SCOPE)
   set(OUT "${out}" PARENT_SCOPE)
@@ -52,7 +71,8 @@ function(query text)
   set(_query_count ${n} PARENT_SCOPE)
   set(file "${WORK_DIR}/queries_${n}.txt")
   file(WRITE "${file}" "${text}")
-  execute_process(COMMAND "${DSM_LOOKUP}" ${ARGN} --input "${file}"
+  at_the_depth(args ${ARGN})
+  execute_process(COMMAND "${DSM_LOOKUP}" ${args} --input "${file}"
     RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
   set(RC "${rc}" PARENT_SCOPE)
   set(OUT "${out}" PARENT_SCOPE)
@@ -305,7 +325,7 @@ if(NOT rc EQUAL 0)
   message(FATAL_ERROR "make_sample_map failed (${rc}): ${err}")
 endif()
 set(SOFT "${WORK_DIR}/soft.dsm")
-if(CHECK MATCHES "^soft_")
+if(CHECK MATCHES "^soft_" OR CHECK STREQUAL "auto_bias")
   build_soft_map("${SOFT}" 1)
 endif()
 
@@ -456,6 +476,34 @@ elseif(CHECK STREQUAL "bias")
   expect_equal(OUT "${after}")
   query("${points}" "${MONO}" -s raster -l 0 -b 0)
   expect_equal(OUT "${after}")
+
+elseif(CHECK STREQUAL "auto_bias")
+  # The default bias is automatic: lit ground reads 1, the umbra stays dark,
+  # and the answers are the library's with the bias unset; for point lookups
+  # and soft shadows alike.
+  execute_process(COMMAND "${DSM_LOOKUP}" "${SOFT}" --point 5,0,0 --point=-4.5,0,1 --point 0,0,-5 --point 3.6,0,3.6
+    RESULT_VARIABLE RC OUTPUT_VARIABLE OUT ERROR_VARIABLE ERR)
+  set(LAST_COMMAND "dsm-lookup ${SOFT} --point ... (no --bias)")
+  expect_rc(0)
+  expect_equal(OUT "1\n1\n1\n1\n")
+  query("${SOFT_LIT}" "${SOFT}" --bias auto)
+  expect_equal(OUT "1\n1\n1\n1\n")
+  query("${SOFT_UMBRA}" "${SOFT}" --bias auto)
+  expect_equal(OUT "0\n0\n0\n")
+  # A number overrides it: a bias beyond the square (5 in front of the ground) lights the umbra.
+  query("${SOFT_UMBRA}" "${SOFT}" --bias 6)
+  expect_equal(OUT "1\n1\n1\n")
+  query("${SOFT_UMBRA}${SOFT_PENUMBRA}${SOFT_LIT}" "${SOFT}" --area-light disk:1)
+  expect_rc(0)
+  soft_reference("${SOFT}" world disk 1 1 mtsm 64 0 0 auto 1 "${SOFT_UMBRA}${SOFT_PENUMBRA}${SOFT_LIT}")
+  expect_equal(OUT "${REFERENCE_VALUES}")
+  string(REGEX MATCH "1\n1\n1\n1\n$" lit "${OUT}")
+  if(NOT lit)
+    message(FATAL_ERROR "lit ground is not lit with the automatic bias:\n${OUT}")
+  endif()
+  run("${SOFT}" --bias frob --point 1,2,3)
+  expect_rc(2)
+  expect_contains(ERR "--bias: expected auto or a finite number, got 'frob'")
 
 elseif(CHECK STREQUAL "error_bound")
   # rgb.dsm records error bounds 0.01 (level 0) and 0.015 (level 1); a blend
@@ -893,7 +941,7 @@ elseif(CHECK STREQUAL "streaming")
 import os, select, subprocess, sys, time
 
 tool, mono, expected_a, expected_b = sys.argv[1:5]
-process = subprocess.Popen([tool, mono, "--space", "raster", "--level", "0"],
+process = subprocess.Popen([tool, mono, "--space", "raster", "--level", "0", "--bias", "0"],
                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
 pending = b""
 

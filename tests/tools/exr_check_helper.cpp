@@ -196,6 +196,7 @@ int checkDeepened(const std::string& flatPath, const std::string& mapPath) {
     const auto map = dsm::DeepShadowMap::open(mapPath);
     dsm::LookupContext lookup(map);
     dsm::LookupOptions nearest;
+    nearest.bias = 0.0;  // the stored functions at the depths themselves
     nearest.level = 0;
     double worst = 0.0;
     for (int y = 0; y < kSize; ++y)

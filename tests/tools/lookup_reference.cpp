@@ -5,7 +5,8 @@
 //       reads "x y z" per line (std::istream >>, nothing else) and prints, per
 //       point, the dsm::LookupContext answer as "%.9g" values separated by
 //       commas: V or R,G,B, then the error bound. SPACE is world, light or
-//       raster; FILTER box, triangle or gaussian; LEVEL -1 for automatic.
+//       raster; FILTER box, triangle or gaussian; LEVEL -1 for automatic;
+//       BIAS a number or auto (here and below).
 //   lookup_reference --soft MAP SPACE SHAPE W H METHOD SAMPLES LAYERS ZTHRESHOLD BIAS SEED < points
 //       the same for dsm::SoftShadowContext with the light
 //       AreaLight::forMap(SHAPE disk: radius W; rect: W wide, H high):
@@ -82,7 +83,7 @@ void printAnswers(const std::vector<std::string>& args) {
     options.filter = filterNamed(args[2]);
     options.filterWidth = std::stod(args[3]);
     if (const int level = std::stoi(args[4]); level >= 0) options.level = static_cast<unsigned>(level);
-    options.bias = std::stod(args[5]);
+    if (args[5] != "auto") options.bias = std::stod(args[5]);
     dsm::LookupContext context(map);
     std::array<double, 3> p{};
     while (std::cin >> p[0] >> p[1] >> p[2]) {
@@ -112,7 +113,7 @@ void printSoftAnswers(const std::vector<std::string>& args) {
     options.samples = std::stoi(args[6]);
     if (const int layers = std::stoi(args[7]); layers != 0) options.layers = layers;
     options.zThreshold = std::stod(args[8]);
-    options.bias = std::stod(args[9]);
+    if (args[9] != "auto") options.bias = std::stod(args[9]);
     options.seed = std::stoull(args[10]);
     dsm::SoftShadowContext context(std::make_shared<dsm::SoftShadowTracer>(map, light));
     dsm::Vec3 p{};

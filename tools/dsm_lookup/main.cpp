@@ -80,7 +80,8 @@ struct Options {
     std::string filter = "box";
     double filterWidth = 1.0;
     std::string level = "auto";
-    double bias = 0.0;
+    std::string bias = "auto";
+    std::optional<double> biasValue;  ///< --bias parsed; unset: automatic
     std::string format = "csv";
     bool header = false;
     bool errorBound = false;
@@ -511,6 +512,13 @@ Space spaceFromName(const std::string& name) {
 }
 
 /// Nothing for "auto", else the level.
+std::optional<double> biasFromText(const std::string& text) {
+    if (text == "auto") return std::nullopt;
+    const std::optional<double> bias = parseNumber(text);
+    if (!bias) throw UsageError("--bias: expected auto or a finite number, got " + quotedInput(text));
+    return bias;
+}
+
 std::optional<unsigned> levelFromText(const std::string& text) {
     if (text == "auto") return std::nullopt;
     int level = 0;
@@ -558,7 +566,7 @@ void checkSoftOptions(const CLI::App& app, const Options& o) {
     if (o.errorBound) throw UsageError("--error-bound does not apply to --area-light queries");
     if (o.space == "raster")
         throw UsageError("--area-light takes world or light points, not --space raster");
-    if (o.bias < 0.0) throw UsageError("--bias: must be >= 0 with --area-light");
+    if (o.biasValue && *o.biasValue < 0.0) throw UsageError("--bias: must be >= 0 with --area-light");
     // The PCF baseline traces no rays and reads every layer through its filter.
     if (o.soft == "pcf")
         for (const char* name : {"--light-samples", "--layers", "--seed"})
@@ -622,7 +630,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
         lookup.filter = *dsm::pixelFilterFromName(o.filter);  // CLI11 checked the name
         lookup.filterWidth = o.filterWidth;
         lookup.level = level;
-        lookup.bias = o.bias;
+        lookup.bias = o.biasValue;
         mode = std::make_unique<PointLookup>(system, handle, spaceFromName(o.space), lookup);
     } else {
         const dsm::AreaLightSize size = parseAreaLight(o.areaLight);
@@ -637,7 +645,7 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
         shadow.samples = o.lightSamples;
         if (o.layers != 0) shadow.layers = o.layers;
         shadow.zThreshold = o.zThreshold;
-        shadow.bias = o.bias;
+        shadow.bias = o.biasValue;
         shadow.seed = o.seed;
         const SoftMethod method = o.soft == "pcf" ? SoftMethod::Pcf : SoftMethod::Mtsm;
         details = method == SoftMethod::Pcf ? Details::Pcf : Details::Traced;
@@ -706,8 +714,10 @@ int main(int argc, char** argv) {
         ->type_name("auto|L")
         ->capture_default_str();
     app.add_option("-b,--bias", o.bias,
-                   "Depth bias subtracted from each query depth (light units); with --area-light the receiver "
-                   "bias, >= 0")
+                   "Depth bias subtracted from each query depth (light units): auto (from the map: a pixel's "
+                   "depth footprint at the query's depth) or a number; with --area-light the receiver bias, "
+                   "auto adding --z-threshold, a number >= 0")
+        ->type_name("auto|B")
         ->capture_default_str();
     app.add_option("--format", o.format, "Answer format: CSV lines or JSON Lines")
         ->check(CLI::IsMember({"csv", "json"}))
@@ -758,7 +768,7 @@ int main(int argc, char** argv) {
     std::optional<unsigned> level;
     std::vector<std::array<double, 3>> points;
     try {
-        if (!std::isfinite(o.bias)) throw UsageError("--bias: expected a finite number");
+        o.biasValue = biasFromText(o.bias);
         if (o.header && o.format != "csv") throw UsageError("--header applies to --format csv only");
         level = levelFromText(o.level);
         for (const std::string& p : o.points) points.push_back(parsePointArgument(p));

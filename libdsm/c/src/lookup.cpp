@@ -76,7 +76,7 @@ dsm_result lookupOptions(const dsm_lookup_options* options, const char* function
     lookup.filter = static_cast<PixelFilter>(o.filter);
     lookup.filterWidth = o.filter_width;
     if (o.level != DSM_LEVEL_AUTO) lookup.level = static_cast<unsigned>(o.level);
-    lookup.bias = o.bias;
+    if (o.bias != DSM_BIAS_AUTO) lookup.bias = o.bias;
     space = o.space == DSM_SPACE_WORLD ? LookupSpace::world
             : o.space == DSM_SPACE_LIGHT ? LookupSpace::light
                                          : LookupSpace::raster;

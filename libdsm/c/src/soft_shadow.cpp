@@ -67,7 +67,7 @@ dsm_result dsm_soft_shadow(dsm_soft_context* context, const dsm_soft_shadow_opti
         soft.samples = o.samples;
         if (o.layers != 0) soft.layers = o.layers;  // 0: all of the map's layers
         soft.zThreshold = o.z_threshold;
-        soft.bias = o.bias;
+        if (o.bias != DSM_BIAS_AUTO) soft.bias = o.bias;
         soft.visibilityThreshold = o.visibility_threshold;
         soft.seed = o.seed;
         soft.hierarchy = o.hierarchy != 0;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "dsm/area_light.h"
+#include "dsm/auto_bias.h"
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
 #include "dsm/error.h"

@@ -7,6 +7,7 @@
 #include <new>
 #include <utility>
 
+#include "dsm/auto_bias.h"
 #include "dsm/error.h"
 #include "pixel_filter.h"
 #include "reader_impl.h"
@@ -138,7 +139,7 @@ bool isBilinear(PixelFilter filter, double width) {
     if (!std::isfinite(options.filterWidth) || options.filterWidth < 0.0)
         throw Error(ErrorCode::argument,
                     concat("lookup: filter width ", options.filterWidth, " is not a finite value >= 0"));
-    throw Error(ErrorCode::argument, concat("lookup: bias ", options.bias, " is not finite"));
+    throw Error(ErrorCode::argument, concat("lookup: bias ", *options.bias, " is not finite"));
 }
 
 // Raster position and depth of a point; false when it is lit without a
@@ -314,7 +315,7 @@ double LookupState::sumFootprint(const MapImpl& map, unsigned level, double z, d
 LookupResult LookupState::raster(const MapImpl& map, double rx, double ry, double z, const LookupOptions& options) {
     const MapInfo& info = map.info;
     if (!std::isfinite(rx) || !std::isfinite(ry) || !std::isfinite(z) || !std::isfinite(options.filterWidth) ||
-        options.filterWidth < 0.0 || !std::isfinite(options.bias)) [[unlikely]]
+        options.filterWidth < 0.0 || (options.bias && !std::isfinite(*options.bias))) [[unlikely]]
         throwBadArguments(rx, ry, z, options);
     LookupResult result;
     result.channels = info.channels;
@@ -322,7 +323,7 @@ LookupResult LookupState::raster(const MapImpl& map, double rx, double ry, doubl
     // even when a wide footprint would reach pixels inside.
     if (!(rx >= 0.0 && rx <= static_cast<double>(info.width) && ry >= 0.0 && ry <= static_cast<double>(info.height)))
         return result;
-    const double zq = z - options.bias;
+    const double zq = z - (options.bias ? *options.bias : automaticBias(info, rx, ry, z, options.normal));
     const double minWidth = minimumWidth(options.filter);
     const double width = std::max(options.filterWidth, minWidth);
     const unsigned coarsest = static_cast<unsigned>(info.levels.size() - 1);
@@ -376,6 +377,11 @@ LookupResult LookupState::at(const MapImpl& map, LookupSpace space, const std::a
         LookupResult lit;
         lit.channels = map.info.channels;
         return lit;
+    }
+    if (space == LookupSpace::world && options.normal && !options.bias) {
+        LookupOptions light = options;  // the automatic bias takes a light-space normal
+        light.normal = lightSpaceNormal(map.info.camera, *options.normal);
+        return raster(map, rx, ry, z, light);
     }
     return raster(map, rx, ry, z, options);
 }

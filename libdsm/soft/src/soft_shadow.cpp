@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "depth_hierarchy.h"
+#include "dsm/auto_bias.h"
 #include "dsm/error.h"
 #include "reader_impl.h"
 #include "text.h"
@@ -118,6 +119,7 @@ struct SoftShadowContext::Impl {
     double vis[3] = {1.0, 1.0, 1.0};
     double consumed = -std::numeric_limits<double>::infinity();
     double zThreshold = 0.0;
+    double bias = 0.0;  // of the current query
     double stopBelow = 0.0;
     std::size_t layers = 1;
     SampleAttenuation attenuation = SampleAttenuation::Subtractive;
@@ -191,13 +193,16 @@ struct SoftShadowContext::Impl {
         consumed = std::max(consumed, deepestHit);
     }
 
+    // A monochrome pixel's one value applies to each of the ray's channels:
+    // the ray may already carry colour from RGB pixels it crossed before.
     void attenuate(const VisibilityView& f, std::size_t i, std::size_t layerBegin, std::uint64_t hits,
                    std::uint64_t count) {
         const double share = static_cast<double>(hits) / static_cast<double>(count);
-        const int n = f.channels() == 1 ? 1 : 3;
-        for (int c = 0; c < n; ++c) {
-            const double before = i == layerBegin ? 1.0 : f.value(i - 1, c);
-            const double after = f.value(i, c);
+        const bool mono = f.channels() == 1;
+        for (int c = 0; c < 3; ++c) {
+            const int stored = mono ? 0 : c;
+            const double before = i == layerBegin ? 1.0 : f.value(i - 1, stored);
+            const double after = f.value(i, stored);
             auto& v = vis[c];
             if (attenuation == SampleAttenuation::Multiplicative) {
                 if (before <= 0.0) continue;  // nothing left to learn in this layer
@@ -207,7 +212,6 @@ struct SoftShadowContext::Impl {
                 v = std::max(0.0, v - (before - after) * share);
             }
         }
-        if (n == 1) vis[1] = vis[2] = vis[0];
     }
 
     // Every pixel the ray crosses, in order (Amanatides & Woo).
@@ -257,7 +261,7 @@ struct SoftShadowContext::Impl {
             std::uint32_t x, y;
         } children[4];
         int n = 0;
-        const double size = std::ldexp(1.0, g - 1);
+        const double size = static_cast<double>(std::uint64_t{1} << (g - 1));  // exact, no libm call per node
         const double W = info().width, H = info().height;
         for (std::uint32_t j = 0; j < 2; ++j)
             for (std::uint32_t i = 0; i < 2; ++i) {
@@ -300,7 +304,7 @@ struct SoftShadowContext::Impl {
             std::uint32_t x, y;
         } starts[4];
         int n = 0;
-        const double size = std::ldexp(1.0, g);
+        const double size = static_cast<double>(std::uint64_t{1} << g);
         for (std::uint32_t y = y0 >> g; y <= y1 >> g; ++y)
             for (std::uint32_t x = x0 >> g; x <= x1 >> g; ++x) {
                 double a = ua, b = ub;
@@ -360,35 +364,33 @@ struct SoftShadowContext::Impl {
         if (!(o.zThreshold >= 0.0) || !std::isfinite(o.zThreshold))
             throw Error(ErrorCode::argument,
                         concat("soft shadow: z threshold ", o.zThreshold, " is not a finite value >= 0"));
-        if (!(o.bias >= 0.0) || !std::isfinite(o.bias))
-            throw Error(ErrorCode::argument, concat("soft shadow: bias ", o.bias, " is not a finite value >= 0"));
+        if (o.bias && (!(*o.bias >= 0.0) || !std::isfinite(*o.bias)))
+            throw Error(ErrorCode::argument, concat("soft shadow: bias ", *o.bias, " is not a finite value >= 0"));
         if (!(o.visibilityThreshold >= 0.0 && o.visibilityThreshold <= 1.0))
             throw Error(ErrorCode::argument,
                         concat("soft shadow: visibility threshold ", o.visibilityThreshold, " is not in [0, 1]"));
     }
 
-    // The receiver in light space and raster; false when it is lit by rule
-    // (outside the map, or not beyond the light's plane plus the bias).
-    /// The start of every query: checks it, counts it and projects the
-    /// receiver (light space p, raster rx, ry). False when the receiver is
-    /// lit for lack of a place in the map (result is then the answer).
+    /// The start of every query: checks it, counts it, projects the
+    /// receiver (light space p, raster rx, ry) and sets the bias. False when
+    /// the receiver is lit by rule (outside the map, or not beyond the light's
+    /// plane plus the bias); result is then the answer.
     bool begin(const Vec3& world, const SoftShadowOptions& o, SoftShadowResult& result, Vec3& p, double& rx,
                double& ry) {
         check(world, o);
         ++stats.queries;
         result.channels = info().channels;
-        if (!receiver(world, o, p, rx, ry)) return false;
-        zThreshold = o.zThreshold;
-        return true;
-    }
-
-    bool receiver(const Vec3& world, const SoftShadowOptions& o, Vec3& p, double& rx, double& ry) const {
         const MapInfo& m = info();
         p = m.camera.worldToLightSpace(world);
         double z;
         if (!m.camera.lightToRaster(p, int(m.width), int(m.height), rx, ry, z)) return false;
         if (!(rx >= 0.0 && rx <= m.width && ry >= 0.0 && ry <= m.height)) return false;
-        return p[2] - o.bias > shared->light.planeDepth();
+        zThreshold = o.zThreshold;
+        bias = o.bias ? *o.bias
+                      : o.zThreshold + automaticBias(m, rx, ry, p[2],
+                                                     o.normal ? std::optional<Vec3>(lightSpaceNormal(m.camera, *o.normal))
+                                                              : std::nullopt);
+        return p[2] - bias > shared->light.planeDepth();
     }
 };
 
@@ -415,7 +417,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     s.attenuation = options.attenuation;
     s.layers = static_cast<std::size_t>(std::min(options.layers.value_or(m.maxLayers), m.maxLayers));
     const double d = s.shared->light.planeDepth();
-    const double zEnd = p[2] - options.bias;
+    const double zEnd = p[2] - s.bias;
     double zStart = d;
     if (options.classification) {
         double zMin;
@@ -466,7 +468,7 @@ SoftShadowResult SoftShadowContext::pcfVisibility(const Vec3& receiverWorld, con
     double prx, pry;
     if (!s.begin(receiverWorld, options, result, p, prx, pry)) return result;
     double zBlocker;
-    if (!s.classify(p, p[2] - options.bias, zBlocker)) {
+    if (!s.classify(p, p[2] - s.bias, zBlocker)) {
         result.classifiedLit = true;
         ++s.stats.classifiedLit;
         return result;
@@ -480,7 +482,7 @@ SoftShadowResult SoftShadowContext::pcfVisibility(const Vec3& receiverWorld, con
     LookupOptions lookup;
     lookup.filter = PixelFilter::Box;
     lookup.filterWidth = std::max(1.0, screen * pixelsPerUnit);
-    lookup.bias = options.bias;
+    lookup.bias = s.bias;
     const LookupResult l = s.lookup->raster(prx, pry, p[2], lookup);
     result.v = l.v;
     result.blockerDepth = zBlocker;

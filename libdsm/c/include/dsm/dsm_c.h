@@ -191,6 +191,11 @@ DSM_C_API dsm_result dsm_map_get_metadata(const dsm_map* map, const char** json,
 enum { DSM_SPACE_WORLD = 0, DSM_SPACE_LIGHT = 1, DSM_SPACE_RASTER = 2 };
 /** dsm_lookup_options.level: choose levels from the filter width and blend two. */
 #define DSM_LEVEL_AUTO (-1)
+/** dsm_lookup_options.bias, dsm_soft_shadow_options.bias: the automatic bias,
+ *  which scales with the receiver's depth and the map's resolution
+ *  (dsm/auto_bias.h; for soft shadows plus z_threshold). Any other value is
+ *  used as given. */
+#define DSM_BIAS_AUTO (-1e300)
 
 typedef struct dsm_lookup_options {
     size_t size;          /**< sizeof(dsm_lookup_options) */
@@ -198,9 +203,10 @@ typedef struct dsm_lookup_options {
     int32_t filter;       /**< DSM_FILTER_* */
     double filter_width;  /**< in level-0 pixels; raised to 1 (box) or 2 (others) */
     int32_t level;        /**< DSM_LEVEL_AUTO or a level (clamped to the coarsest) */
-    double bias;          /**< subtracted from the depth, against self-shadowing */
+    double bias;          /**< subtracted from the depth, against self-shadowing; DSM_BIAS_AUTO: from the map */
 } dsm_lookup_options;
-#define DSM_LOOKUP_OPTIONS_INIT {sizeof(dsm_lookup_options), DSM_SPACE_WORLD, DSM_FILTER_BOX, 1.0, DSM_LEVEL_AUTO, 0.0}
+#define DSM_LOOKUP_OPTIONS_INIT \
+    {sizeof(dsm_lookup_options), DSM_SPACE_WORLD, DSM_FILTER_BOX, 1.0, DSM_LEVEL_AUTO, DSM_BIAS_AUTO}
 
 /** Lookups for one thread: remembers the tiles and segments it used last so
  *  that coherent lookups are fast. Keeps its map open. */
@@ -329,7 +335,7 @@ typedef struct dsm_soft_shadow_options {
     int32_t samples;             /**< light samples per receiver, >= 1 */
     int32_t layers;              /**< map layers used; 0 = all */
     double z_threshold;          /**< light-space depth tolerance of a hit */
-    double bias;                 /**< each ray ends this far before the receiver, >= 0 */
+    double bias;                 /**< each ray ends this far before the receiver, >= 0, or DSM_BIAS_AUTO */
     double visibility_threshold; /**< a ray stops below this, in [0, 1] */
     uint64_t seed;
     int32_t hierarchy;      /**< walk rays through the depth quadtree (1) or every pixel (0) */
@@ -337,7 +343,7 @@ typedef struct dsm_soft_shadow_options {
     int32_t attenuation;    /**< DSM_ATTENUATION_* */
 } dsm_soft_shadow_options;
 #define DSM_SOFT_SHADOW_OPTIONS_INIT \
-    {sizeof(dsm_soft_shadow_options), DSM_SOFT_MTSM, 64, 0, 0.0, 0.0, 1e-3, 1, 1, 1, DSM_ATTENUATION_SUBTRACTIVE}
+    {sizeof(dsm_soft_shadow_options), DSM_SOFT_MTSM, 64, 0, 0.0, DSM_BIAS_AUTO, 1e-3, 1, 1, 1, DSM_ATTENUATION_SUBTRACTIVE}
 
 /** A map and an area light, ready to trace; shared by threads. */
 typedef struct dsm_soft_light dsm_soft_light;

@@ -11,6 +11,7 @@
 #include "dsm/error.h"
 #include "dsm/map_info.h"
 #include "dsm/reader.h"
+#include "dsm/vec3.h"
 #include "dsm/version.h"
 
 DSM_NAMESPACE_BEGIN
@@ -32,8 +33,15 @@ struct LookupOptions {
     /// the two nearest levels linearly (trilinear mip-mapping). A level uses that
     /// level only (clamped to the coarsest), with the width scaled to it.
     std::optional<unsigned> level;
-    /// Subtracted from the query depth, against self-shadowing (light units).
-    double bias = 0.0;
+    /// Subtracted from the query depth, against self-shadowing (light units;
+    /// may be negative). Unset (the default): automaticBias() (dsm/auto_bias.h)
+    /// at the lookup's point with `normal`, which scales with the depth and
+    /// the map's resolution.
+    std::optional<double> bias;
+    /// The receiver surface's normal, for the automatic bias only: in world
+    /// space for world lookups, in light space for light and raster lookups;
+    /// any length, either orientation. Unset: the bias assumes a slope of 1.
+    std::optional<Vec3> normal;
 };
 
 struct LookupResult {

@@ -55,8 +55,13 @@ struct SoftShadowOptions {
     double zThreshold = 0.0;
     /// Receiver bias against self-shadowing: each ray ends this far (in
     /// light-space depth) before the receiver. >= 0. Must exceed zThreshold
-    /// plus the receiver surface's depth slope across a pixel.
-    double bias = 0.0;
+    /// plus the receiver surface's depth change across the pixels around it.
+    /// Unset (the default): zThreshold plus automaticBias() (dsm/auto_bias.h)
+    /// at the receiver with `normal`.
+    std::optional<double> bias;
+    /// The receiver surface's world-space normal, for the automatic bias only
+    /// (any length, either orientation). Unset: the bias assumes a slope of 1.
+    std::optional<Vec3> normal;
     /// A ray stops once its visibility is below this in every channel (Xie
     /// §5.2); its value at that point is kept. In [0, 1].
     double visibilityThreshold = 1e-3;
@@ -169,7 +174,7 @@ public:
     /// converted to level-0 pixels (r the light's larger half-size, d its
     /// plane depth; Xie eq. 1 with the light at depth d); the result is a
     /// box-filtered, mip-mapped deep shadow lookup (LookupContext) of that
-    /// width at the receiver's depth minus options.bias. Uses options.bias,
+    /// width at the receiver's depth minus the bias. Uses the bias,
     /// options.zThreshold (in the blocker test) and nothing else.
     SoftShadowResult pcfVisibility(const Vec3& receiverWorld, const SoftShadowOptions& options = {});
 
