@@ -76,13 +76,15 @@ void measure(const std::string& path, int rounds) {
     // Sizes: as stored, and the same pixels as 1.0 tiles at the map's zlib level.
     const int zlibLevel = info.codecLevel >= 0 ? info.codecLevel : 6;
     std::vector<std::uint64_t> oldBytes(info.levels.size(), 0);
+    std::vector<dsm::format::EncodedTile> oldTiles;
     for (const StoredTile& t : tiles) {
         std::vector<dsm::VisibilityFunction> pixels;
         for (std::uint32_t y = 0; y < t.height; ++y)
             for (std::uint32_t x = 0; x < t.width; ++x)
                 pixels.push_back(map->pixel(t.level, t.originX + x, t.originY + y)->toFunction());
         const dsm::format::TileLayout plain{info.channels, info.hasCounts, info.maxLayers, false, 0.0};
-        oldBytes[t.level] += dsm::format::encodeTile(pixels, plain, zlibLevel).stored.size();
+        oldTiles.push_back(dsm::format::encodeTile(pixels, plain, zlibLevel));
+        oldBytes[t.level] += oldTiles.back().stored.size();
     }
     std::uint64_t total = 0, oldTotal = 0;
     std::printf("%s: format %d.%d, %s tiles, zlib level %d\n", path.c_str(), info.versionMajor, info.versionMinor,
@@ -135,6 +137,17 @@ void measure(const std::string& path, int rounds) {
                 "decode throughput / inflate throughput = %.3f\n",
                 tiles.size(), static_cast<unsigned long long>(decodedVertices), decodeSeconds * 1e3,
                 inflateSeconds * 1e3, decodeSeconds > 0.0 ? inflateSeconds / decodeSeconds : 0.0);
+
+    const double oldDecodeSeconds = bestSeconds(rounds, [&] {
+        for (std::size_t i = 0; i < tiles.size(); ++i) {
+            const StoredTile& t = tiles[i];
+            dsm::format::decodeTile(oldTiles[i].stored, oldTiles[i].summary, t.width, t.height,
+                                    {info.channels, info.hasCounts, info.maxLayers, false, 0.0}, limits, "bench",
+                                    t.originX, t.originY);
+        }
+    });
+    std::printf("  decode of the same pixels as 1.0 tiles: %.2f ms (coded / 1.0 decode time %.3f)\n",
+                oldDecodeSeconds * 1e3, oldDecodeSeconds > 0.0 ? decodeSeconds / oldDecodeSeconds : 0.0);
 
     // Cold read + decode: every tile from the file, through no cache.
     const double validateSeconds = bestSeconds(rounds, [&] { dsm::validate(path); });

@@ -124,8 +124,8 @@ TEST(Conformance, ReaderReadsTheRichSampleAsSpecified) {
     EXPECT_TRUE(info.hasCounts);
     EXPECT_EQ(info.maxLayers, 2);
     ASSERT_EQ(info.levels.size(), 4u);
-    EXPECT_EQ(info.levels[0].valueStep, 0.03125);
-    EXPECT_EQ(info.levels[1].valueStep, 0.015625);  // tolerance 0.0625
+    EXPECT_EQ(info.levels[0].valueStep, 0.015625);
+    EXPECT_EQ(info.levels[1].valueStep, 0.0078125);  // tolerance 0.0625
     // Every kind of tile: empty, stored, compressed.
     int empty = 0, stored = 0, compressed = 0;
     for (unsigned l = 0; l < info.levels.size(); ++l)

@@ -67,16 +67,16 @@ double largestDifference(const dsm::VisibilityView& a, const dsm::VisibilityView
 
 }  // namespace
 
-TEST(TileCoding, ValueStepIsThePowerOfTwoWithinAQuarterOfTheTolerance) {
+TEST(TileCoding, ValueStepIsThePowerOfTwoWithinAnEighthOfTheTolerance) {
     EXPECT_EQ(dsm::valueStep(0.0), 0.0);
     EXPECT_EQ(dsm::valueStep(-1.0), 0.0);
     EXPECT_EQ(dsm::valueStep(std::nan("")), 0.0);
-    EXPECT_EQ(dsm::valueStep(0x1p-23), 0.0);      // a quarter of it is below 2^-24
-    EXPECT_EQ(dsm::valueStep(0x1p-22), 0x1p-24);  // the finest step
-    EXPECT_EQ(dsm::valueStep(0.01), 0x1p-9);      // 0.0025 -> 2^-9 = 0.00195...
-    EXPECT_EQ(dsm::valueStep(0.125), 0x1p-5);
+    EXPECT_EQ(dsm::valueStep(0x1p-22), 0.0);      // an eighth of it is below 2^-24
+    EXPECT_EQ(dsm::valueStep(0x1p-21), 0x1p-24);  // the finest step
+    EXPECT_EQ(dsm::valueStep(0.01), 0x1p-10);     // 0.00125 -> 2^-10 = 0.00098...
+    EXPECT_EQ(dsm::valueStep(0.125), 0x1p-6);
     EXPECT_EQ(dsm::valueStep(100.0), 0.5);        // never coarser than 1/2
-    EXPECT_EQ(dsm::compressorTolerance(0.125), 0.125 - 0x1p-6);
+    EXPECT_EQ(dsm::compressorTolerance(0.125), 0.125 - 0x1p-7);
     EXPECT_EQ(dsm::compressorTolerance(0.0), 0.0);
 }
 

@@ -10,8 +10,8 @@
 DSM_NAMESPACE_BEGIN
 
 /// The step a level of `tolerance` stores its values with: the largest power
-/// of two 2^-k (1 <= k <= 24) not above tolerance / 4; 0 (values stored
-/// exactly as float32) when tolerance / 4 < 2^-24 or the tolerance is not a
+/// of two 2^-k (1 <= k <= 24) not above tolerance / 8; 0 (values stored
+/// exactly as float32) when tolerance / 8 < 2^-24 or the tolerance is not a
 /// finite value > 0. Multiples of it up to 1 are exact float32 numbers.
 DSM_API double valueStep(double tolerance);
 
