@@ -1,4 +1,5 @@
-// Quantised storage of visibility values (spec/dsm-format.md §7, "Values"):
+// Quantised storage of visibility values (spec/dsm-format.md §5, "Tolerances
+// and bounds"; coded in §7):
 // a level of tolerance epsilon stores its values as multiples of a step, and
 // its functions are compressed with epsilon less half that step, so the
 // tolerance the file states still bounds the error of the values as stored.
