@@ -24,7 +24,7 @@ namespace {
 using dsm::test::TempDir;
 using Bytes = std::vector<std::uint8_t>;
 
-constexpr std::size_t kHeaderSize = 272;  // tiles follow the header (spec/dsm-format.md)
+constexpr std::size_t kHeaderSize = 296;  // tiles follow the 1.1 header (spec/dsm-format.md)
 
 bool sameBits(double a, double b) { return std::bit_cast<std::uint64_t>(a) == std::bit_cast<std::uint64_t>(b); }
 

@@ -15,6 +15,7 @@
 namespace {
 
 const std::string kSample = std::string(DSM_SOURCE_DIR) + "/spec/samples/tiny.dsm";
+const std::string kRichSample = std::string(DSM_SOURCE_DIR) + "/spec/samples/rich.dsm";
 
 // The content of the sample, as listed in the spec.
 void writeTinySample(const std::string& path) {
@@ -25,6 +26,7 @@ void writeTinySample(const std::string& path) {
     o.channels = 1;
     o.mipLevels = 1;
     o.zlibLevel = 0;
+    o.formatMinor = 0;  // the 1.0 sample: 1.1 readers still read it
     o.tolerance = 0.125;
     o.filter = dsm::PixelFilter::Gaussian;
     o.filterWidth = 2.0;
@@ -43,7 +45,121 @@ void writeTinySample(const std::string& path) {
     writer.finish();
 }
 
+// The content of the 1.1 sample, as listed in the spec: RGB and monochrome
+// pixels, counts, two layers (the second starting at the first's last
+// depth), values on the level's step, four levels, empty, stored and
+// compressed tiles, an area light.
+dsm::VisibilityFunction richPixel(std::uint32_t x, std::uint32_t y) {
+    dsm::VisibilityFunction f(3, true);
+    const auto rgb = [&](float z, float r, float g, float b, std::uint32_t n) {
+        const float v[3] = {r, g, b};
+        f.append(z, v, n);
+    };
+    const auto mono = [&](float z, float v, std::uint32_t n) {
+        if (f.channels() != 1) f = dsm::VisibilityFunction(1, true);
+        f.append(z, v, n);
+    };
+    if (x == 0 && y == 0) {
+        rgb(1.0f, 0.75f, 0.5f, 0.25f, 2);
+        rgb(2.0f, 0.0f, 0.0f, 0.0f, 1);
+    } else if (x == 1 && y == 0) {
+        mono(1.5f, 0.5f, 1);
+        mono(2.0f, 0.0f, 1);
+        f.beginLayer();  // behind the opaque depth 2, starting at it
+        mono(2.0f, 0.5f, 0);
+        mono(3.0f, 0.25f, 1);
+    } else if (x == 0 && y == 1) {
+        for (int i = 0; i < 24; ++i) mono(1.0f + 0.125f * float(i), 1.0f - 0.03125f * float(i + 1), 1);
+    } else if (x == 2 && y == 0) {
+        mono(4.0f, 0.5f, 3);
+    } else if (x == 0 && y == 2) {
+        mono(0.5f, 0.75f, 1);
+    } else if (x == 4 && y == 2) {
+        rgb(1.0f, 1.0f, 0.5f, 0.0f, 1);
+    }
+    return f;
+}
+
+void writeRichSample(const std::string& path) {
+    dsm::WriterOptions o;
+    o.width = 5;
+    o.height = 3;
+    o.tileSize = 2;
+    o.channels = 3;
+    o.counts = true;
+    o.maxLayers = 2;
+    o.tolerance = 0.125;
+    o.quantiseValues = true;
+    o.zlibLevel = 9;
+    o.filter = dsm::PixelFilter::Box;
+    o.filterWidth = 1.0;
+    o.camera.projection = dsm::Projection::Perspective;
+    o.camera.screenWindow = {-0.5, 0.5, -0.5, 0.5};
+    o.camera.nearPlane = 1.0;
+    o.areaLightRadius = 0.5;
+    o.areaLightPlaneDepth = 1.0;
+    o.metadata = R"({"sample":"rich"})";
+    dsm::MapWriter writer(path, o);
+    for (std::uint32_t ty = 0; ty < writer.tilesY(); ++ty)
+        for (std::uint32_t tx = 0; tx < writer.tilesX(); ++tx) {
+            std::vector<dsm::VisibilityFunction> pixels;
+            for (std::uint32_t y = 0; y < writer.tileHeight(ty); ++y)
+                for (std::uint32_t x = 0; x < writer.tileWidth(tx); ++x) pixels.push_back(richPixel(2 * tx + x, 2 * ty + y));
+            writer.writeTile(tx, ty, pixels);
+        }
+    writer.finish();
+}
+
 }  // namespace
+
+TEST(Conformance, ReaderReadsTheRichSampleAsSpecified) {
+    const auto map = dsm::DeepShadowMap::open(kRichSample);
+    const dsm::MapInfo& info = map->info();
+    EXPECT_EQ(info.versionMinor, 1);
+    EXPECT_TRUE(info.codedTiles);
+    EXPECT_EQ(info.codecLevel, 9);
+    EXPECT_EQ(info.areaLightRadius, 0.5);
+    EXPECT_EQ(info.areaLightPlaneDepth, 1.0);
+    EXPECT_EQ(info.channels, 3);
+    EXPECT_TRUE(info.hasCounts);
+    EXPECT_EQ(info.maxLayers, 2);
+    ASSERT_EQ(info.levels.size(), 4u);
+    EXPECT_EQ(info.levels[0].valueStep, 0.015625);
+    EXPECT_EQ(info.levels[1].valueStep, 0.0078125);  // tolerance 0.0625
+    // Every kind of tile: empty, stored, compressed.
+    int empty = 0, stored = 0, compressed = 0;
+    for (unsigned l = 0; l < info.levels.size(); ++l)
+        for (std::uint32_t ty = 0; ty < info.levels[l].tilesY; ++ty)
+            for (std::uint32_t tx = 0; tx < info.levels[l].tilesX; ++tx) {
+                const dsm::TileSummary t = map->tile(l, tx, ty);
+                (t.empty() ? empty : t.storedBytes < t.rawBytes ? compressed : stored)++;
+            }
+    EXPECT_GT(empty, 0);
+    EXPECT_GT(stored, 0);
+    EXPECT_GT(compressed, 0);
+    for (std::uint32_t y = 0; y < 3; ++y)
+        for (std::uint32_t x = 0; x < 5; ++x) {
+            const dsm::VisibilityFunction want = richPixel(x, y);
+            if (want.empty())
+                EXPECT_TRUE(map->pixel(0, x, y)->empty()) << "pixel " << x << "," << y;
+            else
+                EXPECT_TRUE(dsm::test::sameFunction(map->pixel(0, x, y).view(), want, true))
+                    << "pixel " << x << "," << y;
+        }
+    EXPECT_EQ(map->pixel(0, 1, 0)->layerBegin(1), 2u);
+    EXPECT_NO_THROW(dsm::validate(kRichSample));
+}
+
+TEST(Conformance, WriterReproducesTheRichSampleByteForByte) {
+    dsm::test::TempDir dir;
+    const std::string path = (dir / "rich.dsm").string();
+    writeRichSample(path);
+    if (std::getenv("DSM_REGENERATE_SAMPLES")) writeRichSample(kRichSample);
+    const auto expected = dsm::test::readFile(kRichSample);
+    const auto actual = dsm::test::readFile(path);
+    ASSERT_EQ(actual.size(), expected.size());
+    EXPECT_TRUE(actual == expected) << "the writer's bytes differ from spec/samples/rich.dsm";
+}
 
 TEST(Conformance, ReaderReadsTheSampleAsSpecified) {
     const auto map = dsm::DeepShadowMap::open(kSample);

@@ -232,9 +232,10 @@ std::uint32_t crc32(const std::uint8_t* data, std::size_t size) {
 // ---------------------------------------------------------------------------
 // The file's layout, read from its bytes at the offsets of the format's tables.
 
-constexpr std::size_t kHeaderSize = 272;
+// Header and level entry sizes are read from the file (they grew in 1.1).
+constexpr std::size_t kHeaderSizeField = 12;
+constexpr std::size_t kLevelEntrySizeField = 220;
 constexpr std::size_t kHeaderCrc = 228;
-constexpr std::size_t kLevelEntrySize = 72;
 constexpr std::size_t kTileEntrySize = 40;
 
 struct Range {
@@ -254,6 +255,7 @@ struct Layout {
     std::vector<Tile> tiles;  // non-empty ones
     std::vector<Level> levels;
     Range levelTable, metadata;
+    std::uint64_t headerSize = 0;
     std::size_t emptyTiles = 0, compressedTiles = 0, storedTiles = 0;
 
     // Regions in file order; the writer leaves no gaps.
@@ -263,14 +265,14 @@ struct Layout {
         return names[r];
     }
     int regionOf(std::uint64_t offset) const {
-        if (offset < kHeaderSize) return Header;
+        if (offset < headerSize) return Header;
         if (offset < levels.front().directory.offset) return TileData;
         if (offset < levelTable.offset) return Directories;
         if (offset < metadata.offset) return LevelTable;
         return Metadata;
     }
     Range region(int r, std::uint64_t fileSize) const {
-        const std::uint64_t bounds[] = {0, kHeaderSize, levels.front().directory.offset, levelTable.offset,
+        const std::uint64_t bounds[] = {0, headerSize, levels.front().directory.offset, levelTable.offset,
                                         metadata.offset, fileSize};
         return {bounds[r], bounds[r + 1] - bounds[r]};
     }
@@ -279,10 +281,12 @@ struct Layout {
 Layout layoutOf(const Bytes& f) {
     Layout L;
     const std::uint32_t levelCount = static_cast<std::uint32_t>(le(f, 216, 4));
-    L.levelTable = {le(f, 232, 8), std::uint64_t(levelCount) * kLevelEntrySize};
+    const std::uint64_t levelEntrySize = le(f, kLevelEntrySizeField, 4);
+    L.headerSize = le(f, kHeaderSizeField, 4);
+    L.levelTable = {le(f, 232, 8), std::uint64_t(levelCount) * levelEntrySize};
     L.metadata = {le(f, 240, 8), le(f, 248, 8)};
     for (std::uint32_t l = 0; l < levelCount; ++l) {
-        const std::size_t e = L.levelTable.offset + l * kLevelEntrySize;
+        const std::size_t e = L.levelTable.offset + l * levelEntrySize;
         const std::uint64_t tiles = le(f, e + 8, 4) * le(f, e + 12, 4);
         L.levels.push_back({e, {le(f, e + 32, 8), tiles * kTileEntrySize}});
         for (std::uint64_t t = 0; t < tiles; ++t) {
@@ -309,7 +313,7 @@ void reseal(Bytes& f, const Layout& L) {
     putLe32(f, 256, crc32(f.data() + L.levelTable.offset, L.levelTable.size));
     putLe32(f, 260, crc32(f.data() + L.metadata.offset, L.metadata.size));
     putLe32(f, kHeaderCrc, 0);
-    putLe32(f, kHeaderCrc, crc32(f.data(), kHeaderSize));
+    putLe32(f, kHeaderCrc, crc32(f.data(), L.headerSize));
 }
 
 // ---------------------------------------------------------------------------

@@ -138,7 +138,9 @@ void checkRoundTrip(const std::filesystem::path& path, const WriterOptions& opti
     const auto map = DeepShadowMap::open(path.string());
     const MapInfo& info = map->info();
     EXPECT_EQ(info.versionMajor, 1);
-    EXPECT_EQ(info.versionMinor, 0);
+    EXPECT_EQ(info.versionMinor, dsm::kFormatVersionMinor);
+    EXPECT_TRUE(info.codedTiles);
+    EXPECT_EQ(info.codecLevel, options.zlibLevel);
     EXPECT_EQ(info.width, image.width);
     EXPECT_EQ(info.height, image.height);
     EXPECT_EQ(info.tileSize, options.tileSize);
@@ -227,7 +229,7 @@ void checkRoundTrip(const std::filesystem::path& path, const WriterOptions& opti
                     if (options.zlibLevel == 0) {
                         EXPECT_EQ(t.storedBytes, t.rawBytes);
                     }
-                    EXPECT_GE(t.offset, 272u);
+                    EXPECT_GE(t.offset, 296u);  // the 1.1 header
                     EXPECT_LE(t.offset + t.storedBytes, info.fileBytes);
                     extents.emplace_back(t.offset, t.offset + t.storedBytes);
                 }
@@ -420,7 +422,8 @@ TEST(RoundTripDetails, AllEmptyMapHasNoTileData) {
     // Header, directories, level table and metadata only.
     std::uint64_t directoryBytes = 0;
     for (const LevelInfo& L : map->info().levels) directoryBytes += std::uint64_t(L.tilesX) * L.tilesY * 40;
-    EXPECT_EQ(map->info().fileBytes, 272 + directoryBytes + 72 * map->info().levels.size() + o.metadata.size());
+    // The 1.1 header (296 bytes) and level entries (80 bytes).
+    EXPECT_EQ(map->info().fileBytes, 296 + directoryBytes + 80 * map->info().levels.size() + o.metadata.size());
 }
 
 TEST(RoundTripDetails, ZlibLevelsChangeOnlyTheStoredBytes) {

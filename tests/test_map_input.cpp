@@ -27,7 +27,7 @@ using dsm::MapInput;
 using dsm::test::TempDir;
 using Bytes = std::vector<std::uint8_t>;
 
-constexpr std::size_t kHeaderSize = 272;  // tiles follow the header (spec/dsm-format.md)
+constexpr std::size_t kHeaderSize = 296;  // tiles follow the 1.1 header (spec/dsm-format.md)
 
 // The caller's reads over a byte vector; reads that touch [failFrom, failTo) fail.
 class VectorInput final : public MapInput {

@@ -110,6 +110,7 @@ protected:
         o.tileSize = 4;
         o.tolerance = 0.01;
         o.zlibLevel = zlibLevel();
+        o.formatMinor = 0;  // the offsets below are those of the 1.0 layout
         o.metadata = "{\"test\":\"reader errors\"}";
         dsm::test::writeMap(dir_ / "base.dsm", o, image_);
         base_ = dsm::test::readFile(dir_ / "base.dsm");
@@ -427,7 +428,10 @@ TEST_F(ReaderTileContents, InvalidFunctionBehindAValidCrcNamesThePixel) {
 
 // Rewrites a 1.0 file as a 1.`minor` file whose header, level entries and tile
 // entries are longer by the given amounts, the new bytes filled with a pattern
-// (fields this reader does not know), every offset and CRC updated.
+// (fields this reader does not know), every offset and CRC updated. From 1.1
+// on the first new bytes are 1.1's fields, zero (zlib level 0, no area light,
+// no value step), so the pattern starts after them.
+constexpr std::size_t kHeaderFields11 = 24, kLevelFields11 = 8;
 Bytes asNewerMinorVersion(const Bytes& old, std::uint16_t minor, std::size_t extraHeader, std::size_t extraLevel,
                           std::size_t extraTile) {
     const std::size_t levels = levelCount(old);
@@ -435,7 +439,9 @@ Bytes asNewerMinorVersion(const Bytes& old, std::uint16_t minor, std::size_t ext
     for (std::size_t l = 0; l < levels; ++l)
         firstDirectory = std::min<std::size_t>(firstDirectory, static_cast<std::size_t>(get(old, levelEntry(old, l) + 32, 8)));
     Bytes out(old.begin(), old.begin() + kHeaderSize);
-    for (std::size_t i = 0; i < extraHeader; ++i) out.push_back(static_cast<std::uint8_t>(0xA0 + i % 16));
+    const std::size_t headerZeros = minor >= 1 ? kHeaderFields11 : 0, levelZeros = minor >= 1 ? kLevelFields11 : 0;
+    for (std::size_t i = 0; i < extraHeader; ++i)
+        out.push_back(i < headerZeros ? 0 : static_cast<std::uint8_t>(0xA0 + i % 16));
     // Tile data: everything between the header and the first directory.
     out.insert(out.end(), old.begin() + kHeaderSize, old.begin() + static_cast<std::ptrdiff_t>(firstDirectory));
     std::vector<Bytes> levelEntries;
@@ -454,7 +460,7 @@ Bytes asNewerMinorVersion(const Bytes& old, std::uint16_t minor, std::size_t ext
         Bytes level(old.begin() + static_cast<std::ptrdiff_t>(e), old.begin() + static_cast<std::ptrdiff_t>(e + kLevelEntry));
         put(level, 32, newDir, 8);
         put(level, 64, crc(out, newDir, out.size() - newDir), 4);
-        for (std::size_t k = 0; k < extraLevel; ++k) level.push_back(static_cast<std::uint8_t>(0xC3 ^ k));
+        for (std::size_t k = 0; k < extraLevel; ++k) level.push_back(k < levelZeros ? 0 : static_cast<std::uint8_t>(0xC3 ^ k));
         levelEntries.push_back(level);
     }
     const std::size_t table = out.size();
@@ -507,7 +513,13 @@ void expectSameMap(const DeepShadowMap& a, const DeepShadowMap& b, std::uint64_t
 }
 
 TEST_F(ReaderErrors, NewerMinorVersionWithTheSameLayoutIsRead) {
-    Bytes b = base_;
+    // A 1.1 file (this reader's layout) relabelled 1.7.
+    WriterOptions o;
+    o.tileSize = 4;
+    o.tolerance = 0.01;
+    o.quantiseValues = true;
+    dsm::test::writeMap(dir_ / "base11.dsm", o, image_);
+    Bytes b = dsm::test::readFile(dir_ / "base11.dsm");
     put(b, 10, 7, 2);
     fixHeaderCrc(b);
     const std::string path = save(b);
@@ -515,15 +527,21 @@ TEST_F(ReaderErrors, NewerMinorVersionWithTheSameLayoutIsRead) {
     const auto map = DeepShadowMap::open(path);
     EXPECT_EQ(map->info().versionMajor, 1);
     EXPECT_EQ(map->info().versionMinor, 7);
-    expectSameMap(*DeepShadowMap::open((dir_ / "base.dsm").string()), *map, 0);
+    EXPECT_TRUE(map->info().codedTiles);
+    expectSameMap(*DeepShadowMap::open((dir_ / "base11.dsm").string()), *map, 0);
+    // A 1.7 file must hold 1.1's fields: the 1.0 layout relabelled is refused.
+    Bytes old = base_;
+    put(old, 10, 7, 2);
+    fixHeaderCrc(old);
+    expectRejected(old, {"header size 272 is below the 296 of version 1.7"});
 }
 
 TEST_F(ReaderErrors, NewerMinorVersionWithALongerHeaderIsRead) {
     // Round trip of the rewriting itself: no extra bytes gives the file back.
     EXPECT_EQ(asNewerMinorVersion(base_, 0, 0, 0, 0), base_);
     const auto original = DeepShadowMap::open((dir_ / "base.dsm").string());
-    const Bytes longer = asNewerMinorVersion(base_, 1, 28, 0, 0);  // headerSize 300
-    ASSERT_EQ(longer.size(), base_.size() + 28);
+    const Bytes longer = asNewerMinorVersion(base_, 1, 28, 8, 0);  // headerSize 300, level entries 80
+    ASSERT_EQ(longer.size(), base_.size() + 28 + 8 * levelCount(base_));
     const std::string path = save(longer);
     ASSERT_NO_THROW(dsm::validate(path));
     const auto map = DeepShadowMap::open(path);

@@ -242,8 +242,12 @@ TEST(AreaLight, ForMapPlacesTheLightWhereTheBuildPutIt) {
     EXPECT_EQ(rect.shape(), dsm::AreaLightShape::Rectangle);
     EXPECT_DOUBLE_EQ(rect.planeDepth(), built);
     EXPECT_THROW(dsm::AreaLight::forMap(info, dsm::AreaLightShape::Disk, 2.0 * kLightRadius, 0.0), dsm::Error);
+    // The header records the light (format 1.1).
+    EXPECT_EQ(info.areaLightRadius, kLightRadius);
+    EXPECT_DOUBLE_EQ(info.areaLightPlaneDepth, built);
     // Without a recorded radius there is no light plane to put it on.
     dsm::MapInfo bare = info;
+    bare.areaLightRadius = bare.areaLightPlaneDepth = 0.0;  // as a 1.0 file reads
     bare.metadata = "{}";
     EXPECT_EQ(dsm::AreaLight::recordedRadius(bare), 0.0);
     EXPECT_THROW(dsm::AreaLight::forMap(bare, dsm::AreaLightShape::Disk, 0.5, 0.0), dsm::Error);

@@ -50,6 +50,10 @@ std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent
     j["file"] = file;
     j["file_bytes"] = info.fileBytes;
     j["format_version"] = std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor);
+    j["tile_coding"] = {{"coded", info.codedTiles},
+                        {"codec", "zlib"},
+                        {"level", info.codecLevel >= 0 ? Json(info.codecLevel) : Json(nullptr)}};
+    j["area_light"] = {{"radius", info.areaLightRadius}, {"plane_depth", info.areaLightPlaneDepth}};
     j["width"] = info.width;
     j["height"] = info.height;
     j["tile_size"] = info.tileSize;
@@ -70,6 +74,7 @@ std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent
                           {"tiles_x", level.tilesX},
                           {"tiles_y", level.tilesY},
                           {"tolerance", level.tolerance},
+                          {"value_step", level.valueStep},
                           {"error_bound", level.errorBound},
                           {"vertices", level.vertexCount},
                           {"non_empty_pixels", level.nonEmptyPixels},

@@ -242,15 +242,16 @@ void printCamera(std::ostream& out, const dsm::LightCamera& cam) {
 
 void printLevels(std::ostream& out, const dsm::MapInfo& info) {
     field(out, "levels", std::to_string(info.levels.size()));
-    Table table({"level", "size", "tiles", "tolerance", "error bound", "vertices", "non-empty", "vertices/pixel",
-                 "stored bytes"});
+    Table table({"level", "size", "tiles", "tolerance", "value step", "error bound", "vertices", "non-empty",
+                 "vertices/pixel", "stored bytes"});
     for (std::size_t l = 0; l < info.levels.size(); ++l) {
         const dsm::LevelInfo& L = info.levels[l];
         const std::string perPixel =
             L.nonEmptyPixels ? fixed(static_cast<double>(L.vertexCount) / static_cast<double>(L.nonEmptyPixels), 2)
                              : "-";
         table.add({std::to_string(l), std::to_string(L.width) + " x " + std::to_string(L.height),
-                   std::to_string(L.tilesX) + " x " + std::to_string(L.tilesY), num(L.tolerance), num(L.errorBound),
+                   std::to_string(L.tilesX) + " x " + std::to_string(L.tilesY), num(L.tolerance),
+                   L.valueStep > 0.0 ? num(L.valueStep) : "exact", num(L.errorBound),
                    std::to_string(L.vertexCount), std::to_string(L.nonEmptyPixels), perPixel,
                    std::to_string(L.storedBytes)});
     }
@@ -287,14 +288,25 @@ void printMetadata(std::ostream& out, const std::string& metadata) {
     }
 }
 
+/// "coded (1.1), zlib level 6" or "arrays (1.0), zlib, level not recorded".
+std::string codingText(const dsm::MapInfo& info) {
+    const std::string codec = "zlib";  // the one codec of format 1.x
+    return std::string(info.codedTiles ? "coded (1.1)" : "arrays (1.0)") + ", " + codec +
+           (info.codecLevel >= 0 ? " level " + std::to_string(info.codecLevel) : ", level not recorded");
+}
+
 void printSummary(std::ostream& out, const dsm::MapInfo& info) {
     field(out, "format version", std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor));
+    field(out, "tile coding", codingText(info));
     field(out, "size", std::to_string(info.width) + " x " + std::to_string(info.height));
     field(out, "tile size", std::to_string(info.tileSize));
     field(out, "channels", channelsText(info.channels));
     field(out, "sample counts", info.hasCounts ? "yes" : "no");
     field(out, "MTSM layers", std::to_string(info.maxLayers));
     printCamera(out, info.camera);
+    field(out, "area light", info.areaLightRadius > 0.0 ? "disk of radius " + num(info.areaLightRadius) +
+                                                              " in the plane z = " + num(info.areaLightPlaneDepth)
+                                                        : "none recorded (a point light)");
     field(out, "build filter", std::string(dsm::filterName(info.filter)) + ", width " + num(info.filterWidth));
     printLevels(out, info);
     field(out, "file size", bytesText(info.fileBytes));

@@ -21,6 +21,7 @@
 #include "dsm/output_file.h"
 #include "dsm/reader.h"
 #include "dsm/threads.h"
+#include "dsm/value_step.h"
 #include "dsm/writer.h"
 #include "light_rays.h"
 #include "pixel_filter.h"
@@ -153,6 +154,15 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     w.tolerance = tolerance;
     w.mipLevels = options.mipLevels;
     w.zlibLevel = options.zlibLevel;
+    w.quantiseValues = true;
+    if (light.areaLightRadius > 0.0 && camera.projection == Projection::Perspective) {
+        // The push-back lightCamera applied: the light's plane lies at this
+        // light-space depth (AreaLight, Xie et al. 2007 eq. 4).
+        const auto& window = camera.screenWindow;
+        w.areaLightRadius = light.areaLightRadius;
+        w.areaLightPlaneDepth =
+            light.areaLightRadius / std::min({window[1], -window[0], window[3], -window[2]});
+    }
     {
         nlohmann::json m = {
             {"software", "libdsm"},
@@ -175,7 +185,9 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     MapWriter writer(path, w);
 
     CompressorOptions compression;
-    compression.tolerance = tolerance;
+    // Values are stored rounded to the level's value step: the compressor
+    // leaves room for it so the stated tolerance holds as stored.
+    compression.tolerance = compressorTolerance(tolerance);
     compression.channels = channels;
     compression.keepCounts = counts;
     compression.maxLayers = options.mtsmLayers;

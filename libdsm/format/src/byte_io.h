@@ -22,6 +22,15 @@ public:
     void f32(float v) { u32(std::bit_cast<std::uint32_t>(v)); }
     void f64(double v) { u64(std::bit_cast<std::uint64_t>(v)); }
     void zeros(std::size_t n) { out_.insert(out_.end(), n, 0); }
+    /// Unsigned LEB128: 7 bits a byte, low bits first, high bit set on every
+    /// byte but the last (1 to 5 bytes for a u32).
+    void varint(std::uint32_t v) {
+        while (v >= 0x80) {
+            out_.push_back(static_cast<std::uint8_t>(v | 0x80));
+            v >>= 7;
+        }
+        out_.push_back(static_cast<std::uint8_t>(v));
+    }
     std::size_t size() const { return out_.size(); }
 
 private:
@@ -73,6 +82,43 @@ private:
     std::size_t size_;
     std::size_t pos_ = 0;
     bool overrun_ = false;
+};
+
+/// Reads unsigned LEB128 values (ByteWriter::varint) from a byte range. A
+/// value running past the end or beyond 32 bits sets a flag and yields 0;
+/// callers check ok().
+class VarintReader {
+public:
+    VarintReader(const std::uint8_t* begin, const std::uint8_t* end) : at_(begin), end_(end) {}
+    std::uint32_t next() {
+        if (at_ != end_ && *at_ < 0x80) return *at_++;  // the common one-byte value
+        std::uint32_t v = 0;
+        for (int shift = 0; shift < 35; shift += 7) {
+            if (at_ == end_) break;
+            const std::uint8_t b = *at_++;
+            if (shift == 28 && b > 0x0F) break;  // more than 32 bits
+            v |= static_cast<std::uint32_t>(b & 0x7F) << shift;
+            if (b < 0x80) return v;
+        }
+        bad_ = true;
+        at_ = end_;
+        return 0;
+    }
+    std::uint8_t byte() {
+        if (at_ == end_) {
+            bad_ = true;
+            return 0;
+        }
+        return *at_++;
+    }
+    bool ok() const { return !bad_; }
+    bool atEnd() const { return at_ == end_; }
+    std::size_t remaining() const { return static_cast<std::size_t>(end_ - at_); }
+
+private:
+    const std::uint8_t* at_;
+    const std::uint8_t* end_;
+    bool bad_ = false;
 };
 
 }  // namespace dsm::detail

@@ -1,5 +1,6 @@
 #include "format_layout.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <cstring>
@@ -29,12 +30,13 @@ std::uint32_t crc32(const std::uint8_t* data, std::size_t size) {
 
 std::vector<std::uint8_t> encodeHeader(const Header& h) {
     std::vector<std::uint8_t> out;
-    out.reserve(kHeaderSize);
+    const std::uint32_t size = headerSizeOf(h.versionMinor);
+    out.reserve(size);
     ByteWriter w(out);
     for (std::uint8_t b : kMagic) w.u8(b);
     w.u16(h.versionMajor);
     w.u16(h.versionMinor);
-    w.u32(kHeaderSize);
+    w.u32(size);
     w.u32(h.requiredFlags);
     w.u32(h.optionalFlags);
     w.u32(h.width);
@@ -49,7 +51,7 @@ std::vector<std::uint8_t> encodeHeader(const Header& h) {
     for (double s : h.screenWindow) w.f64(s);
     w.f64(h.nearPlane);
     w.u32(h.levelCount);
-    w.u32(kLevelEntrySize);
+    w.u32(levelEntrySizeOf(h.versionMinor));
     w.u32(kTileEntrySize);
     w.u32(0);  // header CRC, filled below
     w.u64(h.levelTableOffset);
@@ -58,6 +60,13 @@ std::vector<std::uint8_t> encodeHeader(const Header& h) {
     w.u32(h.levelTableCrc);
     w.u32(h.metadataCrc);
     w.u64(h.fileSize);
+    if (h.versionMinor >= 1) {
+        w.u8(h.codec);
+        w.u8(h.codecLevel);
+        w.zeros(6);
+        w.f64(h.areaLightRadius);
+        w.f64(h.areaLightPlaneDepth);
+    }
     const std::uint32_t crc = crc32(out.data(), out.size());
     for (int i = 0; i < 4; ++i) out[kHeaderCrcOffset + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
     return out;
@@ -120,7 +129,26 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     h.levelTableCrc = r.u32();
     h.metadataCrc = r.u32();
     h.fileSize = r.u64();
+    if (h.headerSize >= kHeaderSize11) {
+        h.codec = r.u8();
+        h.codecLevel = r.u8();
+        r.skip(6);
+        h.areaLightRadius = r.f64();
+        h.areaLightPlaneDepth = r.f64();
+    }
     if (!r.ok()) fail("header is truncated");
+
+    if (h.versionMinor >= 1 && h.headerSize < kHeaderSize11)
+        fail(concat("header size ", h.headerSize, " is below the ", kHeaderSize11, " of version 1.", h.versionMinor));
+    if ((h.requiredFlags & kRequiredCodedTiles) && h.versionMinor < 1)
+        fail(concat("coded tiles flag in a version 1.", h.versionMinor, " file"));
+    if (h.codec != kCodecZlib)
+        fail(concat("unknown tile codec ", int(h.codec)), ErrorCode::unsupported);
+    if (h.codecLevel > kMaxZlibLevel) fail(concat("zlib level ", int(h.codecLevel), " is not in [0, 9]"));
+    if (!std::isfinite(h.areaLightRadius) || h.areaLightRadius < 0.0 || !std::isfinite(h.areaLightPlaneDepth) ||
+        h.areaLightPlaneDepth < 0.0)
+        fail(concat("area light radius ", h.areaLightRadius, " or plane depth ", h.areaLightPlaneDepth,
+                    " is not a finite value >= 0"));
 
     if (h.fileSize != fileSize)
         fail(concat("file is ", fileSize, " bytes but its header records ", h.fileSize, " (truncated or extended)"));
@@ -140,7 +168,7 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     if (!std::isfinite(h.filterWidth) || h.filterWidth < 0.0) fail(concat("filter width ", h.filterWidth, " is invalid"));
     if (h.levelCount < 1 || h.levelCount > fullLevelCount(h.width, h.height))
         fail(concat("level count ", h.levelCount, " is not in [1, ", fullLevelCount(h.width, h.height), "]"));
-    if (h.levelEntrySize < kLevelEntrySize || h.levelEntrySize > (1u << 16))
+    if (h.levelEntrySize < levelEntrySizeOf(h.versionMinor) || h.levelEntrySize > (1u << 16))
         fail(concat("level entry size ", h.levelEntrySize, " is invalid"));
     if (h.tileEntrySize < kTileEntrySize || h.tileEntrySize > (1u << 16))
         fail(concat("tile entry size ", h.tileEntrySize, " is invalid"));
@@ -156,7 +184,7 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
     return h;
 }
 
-void encodeLevelEntry(std::vector<std::uint8_t>& out, const LevelEntry& e) {
+void encodeLevelEntry(std::vector<std::uint8_t>& out, const LevelEntry& e, std::uint16_t minor) {
     ByteWriter w(out);
     w.u32(e.info.width);
     w.u32(e.info.height);
@@ -170,10 +198,11 @@ void encodeLevelEntry(std::vector<std::uint8_t>& out, const LevelEntry& e) {
     w.u64(e.info.storedBytes);
     w.u32(e.directoryCrc);
     w.u32(0);
+    if (minor >= 1) w.f64(e.info.valueStep);
 }
 
-LevelEntry decodeLevelEntry(const std::uint8_t* data) {
-    ByteReader r(data, kLevelEntrySize);
+LevelEntry decodeLevelEntry(const std::uint8_t* data, std::uint32_t size) {
+    ByteReader r(data, size);
     LevelEntry e;
     e.info.width = r.u32();
     e.info.height = r.u32();
@@ -186,6 +215,10 @@ LevelEntry decodeLevelEntry(const std::uint8_t* data) {
     e.info.nonEmptyPixels = r.u64();
     e.info.storedBytes = r.u64();
     e.directoryCrc = r.u32();
+    if (size >= kLevelEntrySize11) {
+        r.skip(4);
+        e.info.valueStep = r.f64();
+    }
     return e;
 }
 
@@ -216,14 +249,20 @@ TileSummary decodeTileEntry(const std::uint8_t* data) {
     return t;
 }
 
-Header headerFromInfo(const MapInfo& info) {
+Header headerFromInfo(const MapInfo& info, std::uint16_t minor) {
     Header h;
+    h.versionMinor = minor;
     h.width = info.width;
     h.height = info.height;
     h.tileSize = info.tileSize;
     h.channels = static_cast<std::uint8_t>(info.channels);
     h.maxLayers = static_cast<std::uint8_t>(info.maxLayers);
-    h.requiredFlags = (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u);
+    h.requiredFlags = (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u) |
+                      (info.codedTiles ? kRequiredCodedTiles : 0u);
+    h.codec = static_cast<std::uint8_t>(info.codec);
+    h.codecLevel = static_cast<std::uint8_t>(std::max(info.codecLevel, 0));
+    h.areaLightRadius = info.areaLightRadius;
+    h.areaLightPlaneDepth = info.areaLightPlaneDepth;
     h.filter = static_cast<std::uint8_t>(info.filter);
     h.projection = static_cast<std::uint8_t>(info.camera.projection);
     h.filterWidth = info.filterWidth;
@@ -250,6 +289,11 @@ void infoFromHeader(const Header& h, MapInfo& info) {
     info.camera.screenWindow = h.screenWindow;
     info.camera.nearPlane = h.nearPlane;
     info.fileBytes = h.fileSize;
+    info.codedTiles = (h.requiredFlags & kRequiredCodedTiles) != 0;
+    info.codec = static_cast<TileCodec>(h.codec);
+    info.codecLevel = h.headerSize >= kHeaderSize11 ? h.codecLevel : -1;
+    info.areaLightRadius = h.areaLightRadius;
+    info.areaLightPlaneDepth = h.areaLightPlaneDepth;
 }
 
 }  // namespace dsm::format

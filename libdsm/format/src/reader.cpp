@@ -17,6 +17,17 @@ DSM_NAMESPACE_BEGIN
 using detail::concat;
 using detail::namingFile;
 
+namespace {
+
+bool validValueStep(double step) {
+    if (step == 0.0) return true;
+    int exponent = 0;
+    const double mantissa = std::frexp(step, &exponent);  // step = 2^(exponent - 1) when a power of two
+    return mantissa == 0.5 && exponent - 1 <= -1 && exponent - 1 >= -format::kFinestValueStepExponent;
+}
+
+}  // namespace
+
 void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const std::string& name,
                                     const ReaderOptions& o) {
     path = name;
@@ -52,7 +63,8 @@ void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const st
     if (format::crc32(table.data(), table.size()) != h.levelTableCrc)
         throw Error(ErrorCode::corrupt, concat(where(), ": level table CRC-32 mismatch"));
     for (unsigned l = 0; l < h.levelCount; ++l) {
-        const format::LevelEntry e = format::decodeLevelEntry(table.data() + std::size_t(l) * h.levelEntrySize);
+        const format::LevelEntry e =
+            format::decodeLevelEntry(table.data() + std::size_t(l) * h.levelEntrySize, h.levelEntrySize);
         const std::string lw = concat(where(), " level ", l);
         const LevelInfo& L = e.info;
         if (L.width != levelExtent(info.width, l) || L.height != levelExtent(info.height, l))
@@ -65,6 +77,9 @@ void DeepShadowMap::Impl::openInput(std::shared_ptr<const MapInput> in, const st
         if (!std::isfinite(L.tolerance) || L.tolerance < 0.0 || !std::isfinite(L.errorBound) || L.errorBound < 0.0)
             throw Error(ErrorCode::corrupt,
                         concat(lw, ": tolerance ", L.tolerance, " or error bound ", L.errorBound, " is invalid"));
+        if (!validValueStep(L.valueStep) || (L.valueStep != 0.0 && !info.codedTiles))
+            throw Error(ErrorCode::corrupt, concat(lw, ": value step ", L.valueStep,
+                                                   " is neither 0 nor a power of two 2^-k (k in [1, 24]) of coded tiles"));
         const std::uint64_t tiles = std::uint64_t(L.tilesX) * L.tilesY;
         const std::uint64_t bytes = tiles * h.tileEntrySize;
         if (e.directoryOffset < h.headerSize || e.directoryOffset > fileSize || bytes > fileSize - e.directoryOffset)

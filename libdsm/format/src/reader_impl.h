@@ -51,7 +51,9 @@ struct DeepShadowMap::Impl {
         }
     }
 
-    format::TileLayout layout() const { return {info.channels, info.hasCounts, info.maxLayers}; }
+    format::TileLayout layout(unsigned level) const {
+        return {info.channels, info.hasCounts, info.maxLayers, info.codedTiles, info.levels[level].valueStep};
+    }
 
     std::uint32_t tileExtent(std::uint32_t levelExtent, std::uint32_t t) const {
         return std::min(info.tileSize, levelExtent - t * info.tileSize);
@@ -65,7 +67,7 @@ struct DeepShadowMap::Impl {
         std::vector<std::uint8_t> stored(t.storedBytes);
         if (!t.empty()) readAt(t.offset, stored.data(), stored.size(), where);
         auto tile = std::make_shared<format::DecodedTile>(
-            format::decodeTile(stored, t, tileExtent(L.width, tx), tileExtent(L.height, ty), layout(), options, where,
+            format::decodeTile(stored, t, tileExtent(L.width, tx), tileExtent(L.height, ty), layout(level), options, where,
                                tx * info.tileSize, ty * info.tileSize));
         LoadedTile loaded;
         loaded.memoryBytes = tile->memoryBytes();

@@ -1,6 +1,9 @@
 #include "tile_codec.h"
 
 #include <algorithm>
+#include <bit>
+#include <functional>
+#include <cmath>
 #include <limits>
 
 #include <zlib.h>
@@ -15,12 +18,132 @@ namespace dsm::format {
 using detail::ByteReader;
 using detail::ByteWriter;
 using detail::concat;
+using detail::VarintReader;
 
 namespace {
 
 std::size_t pixelTableBytes(std::size_t pixels) {
     const std::size_t bytes = pixels * 6;
     return (bytes + 3) & ~std::size_t(3);
+}
+
+// Zigzag mapping of a signed difference to an unsigned one: 0, -1, 1, -2, ...
+std::uint32_t zigzag(std::uint32_t difference) {
+    const auto d = static_cast<std::int32_t>(difference);
+    return (static_cast<std::uint32_t>(d) << 1) ^ static_cast<std::uint32_t>(d >> 31);
+}
+std::uint32_t unzigzag(std::uint32_t u) { return (u >> 1) ^ (0u - (u & 1u)); }
+
+// The integer a coded tile stores a value as: its multiple of the step, or
+// its float32 bits when there is no step. Layers start from the key of 1.
+std::uint32_t valueKey(float v, double step) {
+    if (step == 0.0) return std::bit_cast<std::uint32_t>(v);
+    const double multiple = std::round(static_cast<double>(v) / step);
+    if (multiple * step != static_cast<double>(v))
+        throw Error(ErrorCode::internal, concat("value ", v, " is not a multiple of the value step ", step));
+    return static_cast<std::uint32_t>(multiple);
+}
+
+// The 1.0 layout: the pixel table, then per pixel raw arrays.
+std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pixels, const TileLayout& layout) {
+    std::vector<std::uint8_t> raw;
+    ByteWriter w(raw);
+    std::uint32_t running = 0;
+    for (const VisibilityFunction& f : pixels) w.u32(running += static_cast<std::uint32_t>(f.size()));
+    for (const VisibilityFunction& f : pixels) w.u8(f.channels() == 3 ? kPixelRgb : 0);
+    for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
+    w.zeros(pixelTableBytes(pixels.size()) - pixels.size() * 6);
+    for (const VisibilityFunction& f : pixels) {
+        for (std::size_t layer = 1; layer < f.layerCount(); ++layer) w.u32(static_cast<std::uint32_t>(f.layerBegin(layer)));
+        for (float z : f.depths()) w.f32(z);
+        for (float v : f.allValues()) w.f32(v);
+        if (layout.hasCounts)
+            for (std::size_t i = 0; i < f.size(); ++i) w.u32(f.count(i));
+    }
+    return raw;
+}
+
+// The 1.1 coding: every part of the tile in turn, as variable-length
+// integers, each small for the data deep shadow maps hold (spec §7).
+// `partEnds` receives where the depths, the values and the counts begin.
+std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pixels, const TileLayout& layout,
+                                         std::vector<std::size_t>& partEnds) {
+    std::vector<std::uint8_t> raw;
+    ByteWriter w(raw);
+    for (const VisibilityFunction& f : pixels) w.varint(static_cast<std::uint32_t>(f.size()));
+    for (const VisibilityFunction& f : pixels) w.u8(f.channels() == 3 ? kPixelRgb : 0);
+    for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
+    for (const VisibilityFunction& f : pixels)
+        for (std::size_t layer = 1; layer < f.layerCount(); ++layer)
+            w.varint(static_cast<std::uint32_t>(f.layerBegin(layer) - f.layerBegin(layer - 1)));
+    partEnds.push_back(raw.size());
+    // Depths: float32 bit patterns, which rise with the depth. A pixel's first
+    // from the previous non-empty pixel's first (signed), the rest from the
+    // vertex before.
+    std::uint32_t previousFirst = 0;
+    for (const VisibilityFunction& f : pixels) {
+        if (f.empty()) continue;
+        std::uint32_t previous = std::bit_cast<std::uint32_t>(f.z(0));
+        w.varint(zigzag(previous - previousFirst));
+        previousFirst = previous;
+        for (std::size_t i = 1; i < f.size(); ++i) {
+            const std::uint32_t bits = std::bit_cast<std::uint32_t>(f.z(i));
+            w.varint(bits - previous);
+            previous = bits;
+        }
+    }
+    partEnds.push_back(raw.size());
+    // Values: per channel, the fall from the previous vertex of the layer (from
+    // 1 at a layer's first vertex).
+    const std::uint32_t one = valueKey(1.0f, layout.valueStep);
+    for (const VisibilityFunction& f : pixels) {
+        const int c = f.channels();
+        std::uint32_t previous[3] = {one, one, one};
+        std::size_t nextLayer = 1;
+        for (std::size_t i = 0; i < f.size(); ++i) {
+            if (nextLayer < f.layerCount() && i == f.layerBegin(nextLayer)) {
+                previous[0] = previous[1] = previous[2] = one;
+                ++nextLayer;
+            }
+            for (int k = 0; k < c; ++k) {
+                const std::uint32_t key = valueKey(f.value(i, k), layout.valueStep);
+                w.varint(previous[k] - key);
+                previous[k] = key;
+            }
+        }
+    }
+    partEnds.push_back(raw.size());
+    if (layout.hasCounts)
+        for (const VisibilityFunction& f : pixels)
+            for (std::size_t i = 0; i < f.size(); ++i) w.varint(f.count(i));
+    return raw;
+}
+
+// One zlib stream of `raw` that ends a deflate block at each of `partEnds`
+// (Z_BLOCK), so that each part of a coded tile gets Huffman codes of its own:
+// 4 % smaller than one compress2() over the hair ball's tiles. Empty when
+// zlib fails.
+std::vector<std::uint8_t> deflateParts(const std::vector<std::uint8_t>& raw, const std::vector<std::size_t>& partEnds,
+                                       int level) {
+    z_stream z{};
+    if (deflateInit(&z, level) != Z_OK) return {};
+    std::vector<std::uint8_t> out(compressBound(static_cast<uLong>(raw.size())) + 16 * (partEnds.size() + 1));
+    z.next_out = out.data();
+    z.avail_out = static_cast<uInt>(out.size());
+    std::size_t begin = 0;
+    bool ok = true;
+    for (std::size_t k = 0; k <= partEnds.size() && ok; ++k) {
+        const std::size_t end = k < partEnds.size() ? partEnds[k] : raw.size();
+        z.next_in = const_cast<Bytef*>(raw.data() + begin);
+        z.avail_in = static_cast<uInt>(end - begin);
+        const bool last = k == partEnds.size();
+        const int rc = deflate(&z, last ? Z_FINISH : Z_BLOCK);
+        ok = last ? rc == Z_STREAM_END : rc == Z_OK && z.avail_in == 0;
+        begin = end;
+    }
+    out.resize(ok ? z.total_out : 0);
+    deflateEnd(&z);
+    return out;
 }
 
 }  // namespace
@@ -82,24 +205,16 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
     s.minZ = minZ;
     s.maxZ = maxZ;
 
-    std::vector<std::uint8_t> raw;
-    ByteWriter w(raw);
-    std::uint32_t running = 0;
-    for (const VisibilityFunction& f : pixels) w.u32(running += static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(f.channels() == 3 ? kPixelRgb : 0);
-    for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
-    w.zeros(pixelTableBytes(pixels.size()) - pixels.size() * 6);
-    for (const VisibilityFunction& f : pixels) {
-        for (std::size_t layer = 1; layer < f.layerCount(); ++layer) w.u32(static_cast<std::uint32_t>(f.layerBegin(layer)));
-        for (float z : f.depths()) w.f32(z);
-        for (float v : f.allValues()) w.f32(v);
-        if (layout.hasCounts)
-            for (std::size_t i = 0; i < f.size(); ++i) w.u32(f.count(i));
-    }
+    std::vector<std::size_t> partEnds;
+    std::vector<std::uint8_t> raw = layout.coded ? codedTileBytes(pixels, layout, partEnds) : plainTileBytes(pixels, layout);
     if (raw.size() > UINT32_MAX) throw Error(ErrorCode::limit, concat("tile of ", raw.size(), " bytes exceeds 4 GiB"));
     s.rawBytes = static_cast<std::uint32_t>(raw.size());
 
-    if (zlibLevel > 0) {
+    if (zlibLevel > 0 && layout.coded) {
+        std::vector<std::uint8_t> packed = deflateParts(raw, partEnds, zlibLevel);
+        if (packed.empty()) throw Error(ErrorCode::internal, "zlib failed to compress a tile");
+        if (packed.size() < raw.size()) out.stored = std::move(packed);
+    } else if (zlibLevel > 0) {
         uLongf bound = compressBound(static_cast<uLong>(raw.size()));
         std::vector<std::uint8_t> packed(bound);
         if (compress2(packed.data(), &bound, raw.data(), static_cast<uLong>(raw.size()), zlibLevel) != Z_OK)
@@ -115,20 +230,201 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
     return out;
 }
 
+namespace {
+
+// Parses a tile's bytes after decompression into a DecodedTile, checking the
+// layout but not yet the functions. `fail` throws.
+using Fail = std::function<void(const std::string&, ErrorCode)>;
+
+struct TileShape {
+    std::uint32_t width;
+    std::uint32_t height;
+    std::size_t pixels;
+    std::function<std::string(std::size_t)> pixelAt;  // "pixel x,y" in level coordinates
+};
+
+// Sets each record's channels from a pixel flag byte.
+void readPixelFlag(std::uint8_t flags, PixelRecord& record, std::size_t p, const TileShape& shape,
+                   const TileLayout& layout, const Fail& fail) {
+    if (flags & ~kKnownPixelFlags)
+        fail(concat(shape.pixelAt(p), ": unknown flags 0x", std::hex, int(flags)), ErrorCode::corrupt);
+    record.channels = (flags & kPixelRgb) ? 3 : 1;
+    if (static_cast<int>(record.channels) > layout.fileChannels)
+        fail(concat(shape.pixelAt(p), ": RGB pixel in a monochrome map"), ErrorCode::corrupt);
+}
+
+void checkPixelVertices(std::uint64_t n, std::size_t p, const TileShape& shape, const ReaderOptions& limits,
+                        const Fail& fail) {
+    if (n > limits.maxVerticesPerPixel)
+        fail(concat(shape.pixelAt(p), ": ", n, " vertices exceed the reader's limit ", limits.maxVerticesPerPixel),
+             ErrorCode::limit);
+}
+
+void checkLayerCount(std::uint8_t layers, std::uint32_t n, std::size_t p, const TileShape& shape,
+                     const TileLayout& layout, const Fail& fail) {
+    if (layers < 1 || layers > layout.maxLayers)
+        fail(concat(shape.pixelAt(p), ": layer count ", int(layers), " is not in [1, ", layout.maxLayers, "]"),
+             ErrorCode::corrupt);
+    if (layers > 1 && layers > n)
+        fail(concat(shape.pixelAt(p), ": ", int(layers), " layers but ", n, " vertices"), ErrorCode::corrupt);
+}
+
+DecodedTile parsePlainTile(std::span<const std::uint8_t> raw, const TileSummary& summary, const TileShape& shape,
+                           const TileLayout& layout, const ReaderOptions& limits, const Fail& fail) {
+    const std::size_t pixels = shape.pixels;
+    ByteReader r(raw.data(), raw.size());
+    if (!r.need(pixelTableBytes(pixels)))
+        fail(concat("tile of ", raw.size(), " bytes is too short for its pixel table"), ErrorCode::corrupt);
+    std::vector<PixelRecord> records(pixels + 1, PixelRecord{0, 0, 0, 1});
+    std::uint64_t previous = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t cumulative = r.u32();
+        if (cumulative < previous) fail(concat(shape.pixelAt(p), ": cumulative vertex count decreases"), ErrorCode::corrupt);
+        checkPixelVertices(cumulative - previous, p, shape, limits, fail);
+        records[p + 1].vertexStart = cumulative;
+        previous = cumulative;
+    }
+    if (previous != summary.vertexCount)
+        fail(concat("pixel table holds ", previous, " vertices, the directory ", summary.vertexCount), ErrorCode::corrupt);
+    for (std::size_t p = 0; p < pixels; ++p) readPixelFlag(r.u8(), records[p], p, shape, layout, fail);
+    std::uint64_t layerTotal = 0, valueTotal = 0, expected = pixelTableBytes(pixels);
+    const std::uint64_t perVertexExtra = 4 + (layout.hasCounts ? 4 : 0);
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint8_t layers = r.u8();
+        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
+        checkLayerCount(layers, n, p, shape, layout, fail);
+        layerTotal += layers - 1u;
+        valueTotal += std::uint64_t(n) * records[p].channels;
+        expected += 4ull * (layers - 1u) + n * (perVertexExtra + 4ull * records[p].channels);
+        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
+        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
+    }
+    if (expected != raw.size())
+        fail(concat("tile holds ", raw.size(), " bytes but its pixel table describes ", expected), ErrorCode::corrupt);
+    r.seek(pixelTableBytes(pixels));
+
+    DecodedTile tile(shape.width, shape.height, summary.vertexCount, valueTotal, layerTotal, layout.hasCounts);
+    std::copy(records.begin(), records.end(), tile.records());
+    float* const z = tile.depths();
+    float* const v = tile.values();
+    std::uint32_t* const counts = tile.counts();
+    std::uint32_t* const layerStarts = tile.layerStarts();
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const PixelRecord& a = records[p];
+        const PixelRecord& b = records[p + 1];
+        for (std::uint32_t l = a.layerStart; l < b.layerStart; ++l) layerStarts[l] = r.u32();
+        for (std::uint32_t i = a.vertexStart; i < b.vertexStart; ++i) z[i] = r.f32();
+        for (std::uint32_t i = a.valueStart; i < b.valueStart; ++i) v[i] = r.f32();
+        if (layout.hasCounts)
+            for (std::uint32_t i = a.vertexStart; i < b.vertexStart; ++i) counts[i] = r.u32();
+    }
+    if (!r.ok()) fail("tile data is truncated", ErrorCode::corrupt);
+    return tile;
+}
+
+DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary& summary, const TileShape& shape,
+                           const TileLayout& layout, const ReaderOptions& limits, const Fail& fail) {
+    const std::size_t pixels = shape.pixels;
+    VarintReader r(raw.data(), raw.data() + raw.size());
+    std::vector<PixelRecord> records(pixels + 1, PixelRecord{0, 0, 0, 1});
+    std::uint64_t total = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t n = r.next();
+        checkPixelVertices(n, p, shape, limits, fail);
+        total += n;
+        if (total > summary.vertexCount) break;  // reported below, before the sum can overflow
+        records[p + 1].vertexStart = static_cast<std::uint32_t>(total);
+    }
+    if (!r.ok()) fail("tile data is truncated in its vertex counts", ErrorCode::corrupt);
+    if (total != summary.vertexCount)
+        fail(concat("pixel table holds ", total, total > summary.vertexCount ? " or more" : "",
+                    " vertices, the directory ", summary.vertexCount),
+             ErrorCode::corrupt);
+    for (std::size_t p = 0; p < pixels; ++p) readPixelFlag(r.byte(), records[p], p, shape, layout, fail);
+    std::uint64_t layerTotal = 0, valueTotal = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint8_t layers = r.byte();
+        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
+        checkLayerCount(layers, n, p, shape, layout, fail);
+        layerTotal += layers - 1u;
+        valueTotal += std::uint64_t(n) * records[p].channels;
+        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
+        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
+    }
+    if (!r.ok()) fail("tile data is truncated in its pixel table", ErrorCode::corrupt);
+    // Every integer still to come takes at least one byte: a check of the
+    // totals against what is left bounds what is allocated by the raw size.
+    const std::uint64_t integers = layerTotal + total + valueTotal + (layout.hasCounts ? total : 0);
+    if (integers > r.remaining())
+        fail(concat("tile holds ", raw.size(), " bytes, too few for the ", integers,
+                    " integers its pixel table describes"),
+             ErrorCode::corrupt);
+
+    DecodedTile tile(shape.width, shape.height, summary.vertexCount, valueTotal, layerTotal, layout.hasCounts);
+    std::copy(records.begin(), records.end(), tile.records());
+    std::uint32_t* const layerStarts = tile.layerStarts();
+    for (std::size_t p = 0; p < pixels; ++p) {
+        std::uint32_t start = 0;
+        for (std::uint32_t l = records[p].layerStart; l < records[p + 1].layerStart; ++l)
+            layerStarts[l] = start += r.next();
+    }
+    float* const z = tile.depths();
+    std::uint32_t previousFirst = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (a == b) continue;
+        std::uint32_t bits = previousFirst + unzigzag(r.next());
+        previousFirst = bits;
+        z[a] = std::bit_cast<float>(bits);
+        for (std::uint32_t i = a + 1; i < b; ++i) z[i] = std::bit_cast<float>(bits += r.next());
+    }
+    float* const v = tile.values();
+    const double step = layout.valueStep;
+    const float stepFloat = static_cast<float>(step);  // a power of two: exact
+    const std::uint32_t one = step == 0.0 ? std::bit_cast<std::uint32_t>(1.0f) : static_cast<std::uint32_t>(1.0 / step);
+    const std::uint32_t* const starts = layerStarts;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const PixelRecord& a = records[p];
+        const std::uint32_t n = records[p + 1].vertexStart - a.vertexStart;
+        const std::uint32_t c = a.channels;
+        std::uint32_t key[3] = {one, one, one};
+        std::uint32_t layer = a.layerStart;
+        const std::uint32_t layerEnd = records[p + 1].layerStart;
+        float* out = v + a.valueStart;
+        for (std::uint32_t i = 0; i < n; ++i) {
+            if (layer < layerEnd && i == starts[layer]) {
+                key[0] = key[1] = key[2] = one;
+                ++layer;
+            }
+            for (std::uint32_t k = 0; k < c; ++k) {
+                key[k] -= r.next();
+                *out++ = step == 0.0 ? std::bit_cast<float>(key[k]) : static_cast<float>(key[k]) * stepFloat;
+            }
+        }
+    }
+    if (layout.hasCounts) {
+        std::uint32_t* const counts = tile.counts();
+        for (std::uint32_t i = 0; i < summary.vertexCount; ++i) counts[i] = r.next();
+    }
+    if (!r.ok()) fail("tile data is truncated", ErrorCode::corrupt);
+    if (!r.atEnd())
+        fail(concat("tile holds ", r.remaining(), " bytes after what its pixel table describes"), ErrorCode::corrupt);
+    return tile;
+}
+
+}  // namespace
+
 DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& summary, std::uint32_t width,
                        std::uint32_t height, const TileLayout& layout, const ReaderOptions& limits,
                        const std::string& where, std::uint32_t originX, std::uint32_t originY) {
-    auto fail = [&](const std::string& what, ErrorCode code = ErrorCode::corrupt) {
-        throw Error(code, concat(where, ": ", what));
-    };
-    // Pixel p of the tile in level coordinates, as the validation errors below name it.
-    auto pixelAt = [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); };
+    const Fail fail = [&](const std::string& what, ErrorCode code) { throw Error(code, concat(where, ": ", what)); };
     const std::size_t pixels = static_cast<std::size_t>(width) * height;
     if (summary.empty()) return DecodedTile(width, height, 0, 0, 0, false);
 
-    if (stored.size() != summary.storedBytes) fail("stored size does not match the directory");
+    if (stored.size() != summary.storedBytes) fail("stored size does not match the directory", ErrorCode::corrupt);
     const std::uint32_t crc = crc32(stored.data(), stored.size());
-    if (crc != summary.crc32) fail(concat("CRC-32 mismatch (stored ", summary.crc32, ", computed ", crc, ")"));
+    if (crc != summary.crc32)
+        fail(concat("CRC-32 mismatch (stored ", summary.crc32, ", computed ", crc, ")"), ErrorCode::corrupt);
     if (summary.rawBytes > limits.maxTileBytes)
         fail(concat("tile of ", summary.rawBytes, " bytes exceeds the reader's limit ", limits.maxTileBytes),
              ErrorCode::limit);
@@ -138,77 +434,26 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
         inflated.resize(summary.rawBytes);
         uLongf size = summary.rawBytes;
         const int rc = uncompress(inflated.data(), &size, stored.data(), static_cast<uLong>(stored.size()));
-        if (rc != Z_OK) fail(concat("zlib cannot inflate the tile (error ", rc, ")"));
-        if (size != summary.rawBytes) fail(concat("tile inflates to ", size, " bytes, not ", summary.rawBytes));
+        if (rc != Z_OK) fail(concat("zlib cannot inflate the tile (error ", rc, ")"), ErrorCode::corrupt);
+        if (size != summary.rawBytes)
+            fail(concat("tile inflates to ", size, " bytes, not ", summary.rawBytes), ErrorCode::corrupt);
         raw = inflated;
     } else if (summary.storedBytes > summary.rawBytes) {
-        fail(concat("stored size ", summary.storedBytes, " exceeds the raw size ", summary.rawBytes));
+        fail(concat("stored size ", summary.storedBytes, " exceeds the raw size ", summary.rawBytes), ErrorCode::corrupt);
     }
 
-    // The pixel table first, checked and totalled, so that the tile is
-    // allocated once at its final size.
-    ByteReader r(raw.data(), raw.size());
-    if (!r.need(pixelTableBytes(pixels))) fail(concat("tile of ", raw.size(), " bytes is too short for its pixel table"));
-    std::vector<PixelRecord> records(pixels + 1, PixelRecord{0, 0, 0, 1});
-    std::uint64_t previous = 0;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint32_t cumulative = r.u32();
-        if (cumulative < previous) fail(concat(pixelAt(p), ": cumulative vertex count decreases"));
-        if (cumulative - previous > limits.maxVerticesPerPixel)
-            fail(concat(pixelAt(p), ": ", cumulative - previous, " vertices exceed the reader's limit ",
-                        limits.maxVerticesPerPixel),
-                 ErrorCode::limit);
-        records[p + 1].vertexStart = cumulative;
-        previous = cumulative;
-    }
-    if (previous != summary.vertexCount)
-        fail(concat("pixel table holds ", previous, " vertices, the directory ", summary.vertexCount));
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint8_t flags = r.u8();
-        if (flags & ~kKnownPixelFlags) fail(concat(pixelAt(p), ": unknown flags 0x", std::hex, int(flags)));
-        records[p].channels = (flags & kPixelRgb) ? 3 : 1;
-        if (static_cast<int>(records[p].channels) > layout.fileChannels)
-            fail(concat(pixelAt(p), ": RGB pixel in a monochrome map"));
-    }
-    std::uint64_t layerTotal = 0, valueTotal = 0, expected = pixelTableBytes(pixels);
-    const std::uint64_t perVertexExtra = 4 + (layout.hasCounts ? 4 : 0);
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint8_t layers = r.u8();
-        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
-        if (layers < 1 || layers > layout.maxLayers)
-            fail(concat(pixelAt(p), ": layer count ", int(layers), " is not in [1, ", layout.maxLayers, "]"));
-        if (layers > 1 && layers > n) fail(concat(pixelAt(p), ": ", int(layers), " layers but ", n, " vertices"));
-        layerTotal += layers - 1u;
-        valueTotal += std::uint64_t(n) * records[p].channels;
-        expected += 4ull * (layers - 1u) + n * (perVertexExtra + 4ull * records[p].channels);
-        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
-        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
-    }
-    if (expected != raw.size())
-        fail(concat("tile holds ", raw.size(), " bytes but its pixel table describes ", expected));
-    r.seek(pixelTableBytes(pixels));
-
-    DecodedTile tile(width, height, summary.vertexCount, valueTotal, layerTotal, layout.hasCounts);
-    std::copy(records.begin(), records.end(), tile.records());
-    float* const z = tile.depths();
-    float* const v = tile.values();
-    std::uint32_t* const counts = tile.counts();
-    std::uint32_t* const layerStarts = tile.layerStarts();
+    const TileShape shape{width, height, pixels,
+                          [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); }};
+    DecodedTile tile = layout.coded ? parseCodedTile(raw, summary, shape, layout, limits, fail)
+                                    : parsePlainTile(raw, summary, shape, layout, limits, fail);
     float minZ = std::numeric_limits<float>::infinity(), maxZ = -std::numeric_limits<float>::infinity();
     std::uint32_t nonEmpty = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
-        const PixelRecord& a = records[p];
-        const PixelRecord& b = records[p + 1];
-        for (std::uint32_t l = a.layerStart; l < b.layerStart; ++l) layerStarts[l] = r.u32();
-        for (std::uint32_t i = a.vertexStart; i < b.vertexStart; ++i) z[i] = r.f32();
-        for (std::uint32_t i = a.valueStart; i < b.valueStart; ++i) v[i] = r.f32();
-        if (layout.hasCounts)
-            for (std::uint32_t i = a.vertexStart; i < b.vertexStart; ++i) counts[i] = r.u32();
         const VisibilityView view = tile.pixel(p);
         try {
             view.validate();
         } catch (const Error& e) {
-            fail(concat("pixel ", originX + p % width, ",", originY + p / width, ": ", e.what()));
+            fail(concat(shape.pixelAt(p), ": ", e.what()), ErrorCode::corrupt);
         }
         if (!view.empty()) {
             ++nonEmpty;
@@ -216,12 +461,12 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
             maxZ = std::max(maxZ, view.z(view.size() - 1));
         }
     }
-    if (!r.ok()) fail("tile data is truncated");
     if (minZ != summary.minZ || maxZ != summary.maxZ)
         fail(concat("depth range [", minZ, ", ", maxZ, "] differs from the directory's [", summary.minZ, ", ",
-                    summary.maxZ, "]"));
+                    summary.maxZ, "]"),
+             ErrorCode::corrupt);
     if (nonEmpty != summary.nonEmptyPixels)
-        fail(concat(nonEmpty, " non-empty pixels, the directory says ", summary.nonEmptyPixels));
+        fail(concat(nonEmpty, " non-empty pixels, the directory says ", summary.nonEmptyPixels), ErrorCode::corrupt);
     return tile;
 }
 

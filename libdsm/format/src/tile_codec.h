@@ -70,6 +70,10 @@ struct TileLayout {
     int fileChannels = 1;
     bool hasCounts = false;
     int maxLayers = 1;
+    /// The 1.1 coding (CODED_TILES); otherwise the 1.0 layout of raw arrays.
+    bool coded = false;
+    /// The level's value step (coded tiles only; 0: values as float32 bits).
+    double valueStep = 0.0;
 };
 
 struct EncodedTile {
@@ -77,8 +81,9 @@ struct EncodedTile {
     TileSummary summary;              // offset left 0
 };
 
-/// Serialises `pixels` (width * height, row order, already valid) and
-/// compresses with zlib at `zlibLevel` when that makes the tile smaller.
+/// Serialises `pixels` (width * height, row order, already valid; with a
+/// value step, every value a multiple of it) and compresses with zlib at
+/// `zlibLevel` when that makes the tile smaller.
 EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int zlibLevel);
 
 /// Checks the CRC of `stored`, inflates it, parses and checks the layout and

@@ -8,6 +8,7 @@
 
 #include "dsm/error.h"
 #include "dsm/output_file.h"
+#include "dsm/value_step.h"
 #include "format_layout.h"
 #include "mipmap.h"
 #include "text.h"
@@ -59,7 +60,10 @@ struct MapWriter::Impl {
     void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>& pixels) {
         Level& L = levels[level];
         const std::uint32_t index = ty * L.info.tilesX + tx;
-        const format::TileLayout layout{options.channels, options.counts, options.maxLayers};
+        const format::TileLayout layout{options.channels, options.counts, options.maxLayers, options.formatMinor >= 1,
+                                        L.info.valueStep};
+        if (L.info.valueStep > 0.0)
+            for (VisibilityFunction& f : pixels) f = roundValues(f, L.info.valueStep);
         format::EncodedTile encoded = format::encodeTile(pixels, layout, options.zlibLevel);
         if (!encoded.stored.empty()) {
             encoded.summary.offset = offset;
@@ -89,7 +93,10 @@ struct MapWriter::Impl {
         const std::uint32_t cw = tileExtent(child.info.width, tx);
         const std::uint32_t x0 = tx * T, y0 = ty * T;  // child tile origin (child level pixels)
         const std::uint32_t ch = tileExtent(child.info.height, ty);
-        const double tolerance = parent.info.tolerance;
+        // With stored value steps the compressor leaves room for the rounding
+        // (value_step.h), so the level's stated tolerance holds as stored.
+        const double tolerance =
+            options.quantiseValues ? compressorTolerance(parent.info.tolerance) : parent.info.tolerance;
         std::vector<VisibilityView> block;
         std::vector<double> weights;
         // Level-0 pixels covered by pixel x of `level` along one axis: fewer at
@@ -150,6 +157,15 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) try 
     if (!std::isfinite(options.filterWidth) || options.filterWidth < 0.0)
         fail(concat("filter width ", options.filterWidth, " is not a finite value >= 0"));
     if (static_cast<unsigned>(options.filter) > 2) fail("unknown pixel filter");
+    if (options.formatMinor > kFormatVersionMinor)
+        fail(concat("format version 1.", options.formatMinor, " is not one this writer writes (1.0 to 1.",
+                    kFormatVersionMinor, ")"));
+    if (!std::isfinite(options.areaLightRadius) || options.areaLightRadius < 0.0 ||
+        !std::isfinite(options.areaLightPlaneDepth) || options.areaLightPlaneDepth < 0.0)
+        fail(concat("area light radius ", options.areaLightRadius, " or plane depth ", options.areaLightPlaneDepth,
+                    " is not a finite value >= 0"));
+    if (options.formatMinor == 0 && (options.quantiseValues || options.areaLightRadius > 0.0))
+        fail("value steps and the area light need format version 1.1");
     try {
         options.camera.validate();
     } catch (const Error& e) {
@@ -167,6 +183,7 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) try 
         L.info.tilesX = (L.info.width + options.tileSize - 1) / options.tileSize;
         L.info.tilesY = (L.info.height + options.tileSize - 1) / options.tileSize;
         L.info.tolerance = tolerance;
+        L.info.valueStep = options.quantiseValues ? valueStep(tolerance) : 0.0;
         bound += std::max(tolerance, kStoreRounding);
         L.info.errorBound = bound;
         L.directory.resize(std::size_t(L.info.tilesX) * L.info.tilesY);
@@ -177,7 +194,7 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) try 
     s.pending.resize(count);
 
     s.file = std::make_unique<OutputFile>(path);
-    const std::vector<std::uint8_t> placeholder(format::kHeaderSize, 0);
+    const std::vector<std::uint8_t> placeholder(format::headerSizeOf(options.formatMinor), 0);
     s.writeBytes(placeholder.data(), placeholder.size());
 } catch (const Error& e) {
     throw e.withFile(path);
@@ -249,7 +266,11 @@ void MapWriter::finish() try {
     info.filter = s.options.filter;
     info.filterWidth = s.options.filterWidth;
     for (const Level& L : s.levels) info.levels.push_back(L.info);
-    format::Header header = format::headerFromInfo(info);
+    info.codedTiles = s.options.formatMinor >= 1;
+    info.codecLevel = s.options.zlibLevel;
+    info.areaLightRadius = s.options.areaLightRadius;
+    info.areaLightPlaneDepth = s.options.areaLightPlaneDepth;
+    format::Header header = format::headerFromInfo(info, s.options.formatMinor);
 
     std::vector<format::LevelEntry> entries;
     for (const Level& L : s.levels) {
@@ -264,7 +285,7 @@ void MapWriter::finish() try {
         entries.push_back(e);
     }
     std::vector<std::uint8_t> table;
-    for (const format::LevelEntry& e : entries) format::encodeLevelEntry(table, e);
+    for (const format::LevelEntry& e : entries) format::encodeLevelEntry(table, e, s.options.formatMinor);
     header.levelTableOffset = s.offset;
     header.levelTableCrc = format::crc32(table.data(), table.size());
     s.writeBytes(table.data(), table.size());

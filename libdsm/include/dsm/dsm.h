@@ -21,6 +21,7 @@
 #include "dsm/sweep.h"
 #include "dsm/tile_cache.h"
 #include "dsm/transmittance.h"
+#include "dsm/value_step.h"
 #include "dsm/vec3.h"
 #include "dsm/vertex_sink.h"
 #include "dsm/visibility.h"

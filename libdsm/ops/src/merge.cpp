@@ -26,7 +26,6 @@
 #include "dsm/writer.h"
 #include "naming_file.h"
 #include "text.h"
-#include "tile_codec.h"
 
 DSM_NAMESPACE_BEGIN
 
@@ -309,9 +308,15 @@ void requireSameStitchSettings(const DeepShadowMap& map, const DeepShadowMap& fi
     requireSame("the sample counts flag", a.hasCounts ? "on" : "off", b.hasCounts ? "on" : "off", p, q);
     requireSame("the layer count", concat(a.maxLayers), concat(b.maxLayers), p, q);
     requireSame("the mip level count", concat(a.levels.size()), concat(b.levels.size()), p, q);
-    for (std::size_t l = 0; l < a.levels.size(); ++l)
+    for (std::size_t l = 0; l < a.levels.size(); ++l) {
         requireSame(concat("the level ", l, " tolerance"), number(a.levels[l].tolerance), number(b.levels[l].tolerance),
                     p, q);
+        requireSame(concat("the level ", l, " value step"), number(a.levels[l].valueStep),
+                    number(b.levels[l].valueStep), p, q);
+    }
+    requireSame("the zlib level", concat(a.codecLevel), concat(b.codecLevel), p, q);
+    requireSame("the area light", number(a.areaLightRadius) + " at " + number(a.areaLightPlaneDepth),
+                number(b.areaLightRadius) + " at " + number(b.areaLightPlaneDepth), p, q);
     metadata["settings"].erase("region");
     firstMetadata["settings"].erase("region");
     if (auto difference = firstDifference(firstMetadata, metadata, ""))
@@ -377,48 +382,11 @@ void requireTiling(const std::vector<Map>& maps, const std::vector<Rect>& region
     }
 }
 
-// The zlib level the inputs' tiles were written with: the first level whose
-// re-encoding of a few stored tiles matches them byte for byte (by size and
-// CRC-32).
-int detectZlibLevel(const std::vector<Map>& maps) {
-    constexpr std::size_t kSampleTiles = 4;
-    struct Sample {
-        std::vector<VisibilityFunction> pixels;
-        TileSummary stored;
-    };
-    std::vector<Sample> samples;
-    bool sawUncompressed = false;
-    const MapInfo& info = maps.front()->info();
-    const std::uint32_t T = info.tileSize;
-    const LevelInfo& level = info.levels.at(0);
-    for (const Map& map : maps)
-        for (std::uint32_t ty = 0; ty < level.tilesY && samples.size() < kSampleTiles; ++ty)
-            for (std::uint32_t tx = 0; tx < level.tilesX && samples.size() < kSampleTiles; ++tx) {
-                const TileSummary summary = map->tile(0, tx, ty);
-                if (summary.empty()) continue;
-                if (summary.storedBytes == summary.rawBytes) {
-                    sawUncompressed = true;
-                    continue;
-                }
-                Sample s;
-                s.stored = summary;
-                for (std::uint32_t y = ty * T; y < std::min((ty + 1) * T, info.height); ++y)
-                    for (std::uint32_t x = tx * T; x < std::min((tx + 1) * T, info.width); ++x)
-                        s.pixels.push_back(map->pixel(0, x, y).view().toFunction());
-                samples.push_back(std::move(s));
-            }
-    // Stored tiles but none compressed: written with level 0 (or a level that
-    // never paid off, which stores the same bytes). No tiles: any level.
-    if (samples.empty()) return sawUncompressed ? 0 : kDefaultZlibLevel;
-    const format::TileLayout layout{info.channels, info.hasCounts, info.maxLayers};
-    for (int candidate : {6, 1, 2, 3, 4, 5, 7, 8, 9}) {
-        const bool matches = std::all_of(samples.begin(), samples.end(), [&](const Sample& s) {
-            const format::EncodedTile encoded = format::encodeTile(s.pixels, layout, candidate);
-            return encoded.summary.storedBytes == s.stored.storedBytes && encoded.summary.crc32 == s.stored.crc32;
-        });
-        if (matches) return candidate;
-    }
-    return kDefaultZlibLevel;
+// The zlib level the inputs' tiles were written with, as their headers record
+// it (format 1.1); the default for 1.0 inputs, which record none.
+int recordedZlibLevel(const std::vector<Map>& maps) {
+    const int level = maps.front()->info().codecLevel;
+    return level >= 0 ? level : kDefaultZlibLevel;
 }
 
 MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, const MergeOptions& options) {
@@ -440,7 +408,7 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
     report.channels = info.channels;
     report.maxLayers = info.maxLayers;
     report.tolerance = info.levels.at(0).tolerance;
-    report.zlibLevel = options.zlibLevel ? *options.zlibLevel : detectZlibLevel(maps);
+    report.zlibLevel = options.zlibLevel ? *options.zlibLevel : recordedZlibLevel(maps);
     report.inputErrorBound = info.levels.at(0).errorBound;
     report.errorBound = report.inputErrorBound;
 
@@ -459,6 +427,11 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
     if (info.levels.size() > 1 && info.levels[0].tolerance > 0.0)
         w.levelToleranceFactor = info.levels[1].tolerance / info.levels[0].tolerance;
     w.zlibLevel = report.zlibLevel;
+    // The inputs' values are multiples of their levels' steps already: the
+    // writer's rounding leaves them as they are.
+    w.quantiseValues = info.levels.at(0).valueStep > 0.0;
+    w.areaLightRadius = info.areaLightRadius;
+    w.areaLightPlaneDepth = info.areaLightPlaneDepth;
     Json merged = metadata.front();
     merged["settings"]["region"] = Rect{0, 0, info.width, info.height};
     w.metadata = merged.dump();

@@ -90,6 +90,8 @@ AreaLight AreaLight::rectangle(const LightCamera& camera, double halfWidth, doub
 }
 
 double AreaLight::recordedRadius(const MapInfo& info) {
+    if (info.areaLightRadius > 0.0) return info.areaLightRadius;  // the header's (format 1.1)
+    // Files of format 1.0 record it only in their metadata.
     const nlohmann::json metadata = nlohmann::json::parse(info.metadata, nullptr, /*allow_exceptions=*/false);
     if (!metadata.is_object()) return 0.0;
     const auto number = [](const nlohmann::json& j) { return j.is_number() ? j.get<double>() : 0.0; };
@@ -115,8 +117,9 @@ AreaLight AreaLight::forMap(const MapInfo& info, AreaLightShape shape, double ha
         throw Error(ErrorCode::argument,
                     "area light: the map records no area-light radius (build it from a scene whose light has "
                     "area_radius); its light is a point");
-    return make(info.camera, shape, halfWidth, shape == AreaLightShape::Disk ? halfWidth : halfHeight,
-                disk(info.camera, built).planeDepth());
+    const double planeDepth =
+        info.areaLightPlaneDepth > 0.0 ? info.areaLightPlaneDepth : disk(info.camera, built).planeDepth();
+    return make(info.camera, shape, halfWidth, shape == AreaLightShape::Disk ? halfWidth : halfHeight, planeDepth);
 }
 
 double AreaLight::area() const {

@@ -71,7 +71,15 @@ struct LevelInfo {
     std::uint64_t nonEmptyPixels = 0;
     /// Bytes the level's tiles take in the file.
     std::uint64_t storedBytes = 0;
+    /// Values of this level are stored as multiples of this step (a power of
+    /// two, see dsm/value_step.h); 0: stored exactly as float32. The step is
+    /// part of the tolerance: the stated bound holds for the stored values.
+    double valueStep = 0.0;
 };
+
+/// The general-purpose compressor a file's tiles went through (spec
+/// dsm-format.md §3): zlib streams, RFC 1950.
+enum class TileCodec : std::uint8_t { Zlib = 0 };
 
 /// Everything a map's header and level table hold.
 struct MapInfo {
@@ -91,6 +99,20 @@ struct MapInfo {
     /// Filter width in pixels used when the map was built.
     double filterWidth = 1.0;
     std::vector<LevelInfo> levels;
+    /// Tiles use the 1.1 coding (depth deltas, quantised values, variable
+    /// length integers); false for the 1.0 layout of raw arrays.
+    bool codedTiles = false;
+    /// The tiles' compressor and the level the writer gave it (0 = tiles
+    /// stored uncompressed); codecLevel is -1 when the file does not record
+    /// it (format 1.0). A writer given the same level reproduces the tiles.
+    TileCodec codec = TileCodec::Zlib;
+    int codecLevel = -1;
+    /// The area light the map was built for: a disk of this radius (light
+    /// space units) centred on the light axis in the plane z =
+    /// areaLightPlaneDepth, behind which the projection centre was pushed.
+    /// Radius 0: a point light (or a file that does not record it, 1.0).
+    double areaLightRadius = 0.0;
+    double areaLightPlaneDepth = 0.0;
     /// JSON text: build settings, scene, software.
     std::string metadata = "{}";
     std::uint64_t fileBytes = 0;

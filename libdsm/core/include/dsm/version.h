@@ -41,10 +41,10 @@ inline constexpr int kLibraryVersionPatch = DSM_VERSION_PATCH;
 /// Thread-safe; never fails.
 DSM_API const char* libraryVersion() noexcept;
 
-/// The .dsm format version this library writes. It reads every file of the
-/// same major version: minor versions only append fields, which it skips
-/// (spec/dsm-format.md, "Versioning").
+/// The .dsm format version this library writes by default. It reads every
+/// file of the same major version up to this minor one (spec/dsm-format.md,
+/// "Compatibility"); WriterOptions::formatMinor may ask for 1.0 files.
 inline constexpr std::uint16_t kFormatVersionMajor = 1;
-inline constexpr std::uint16_t kFormatVersionMinor = 0;
+inline constexpr std::uint16_t kFormatVersionMinor = 1;
 
 DSM_NAMESPACE_END

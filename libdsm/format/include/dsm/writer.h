@@ -35,8 +35,22 @@ struct WriterOptions {
     /// Each coarser level is recompressed with the previous tolerance times
     /// this factor (Lokovic & Veach §5.3 halve it: total error <= 2 epsilon).
     double levelToleranceFactor = 0.5;
-    /// zlib level 0..9; 0 stores tiles uncompressed.
+    /// zlib level 0..9; 0 stores tiles uncompressed. Recorded in the header
+    /// (1.1), so that a tool rewriting the map reproduces the same tiles.
     int zlibLevel = 6;
+    /// Format minor version written: 1 (coded tiles, value steps, codec and
+    /// area light recorded), or 0 for readers of format 1.0 (raw tile arrays).
+    std::uint16_t formatMinor = kFormatVersionMinor;
+    /// Store every level's values as multiples of valueStep(level tolerance)
+    /// (dsm/value_step.h; format 1.1 only). The level-0 functions given must
+    /// then have been compressed with compressorTolerance(tolerance), so that
+    /// the stated tolerance holds for the values as stored; the writer builds
+    /// the coarser levels that way. Off: values are stored as given.
+    bool quantiseValues = false;
+    /// The area light the map was built for (format 1.1; see MapInfo): a disk
+    /// of this radius in the plane z = areaLightPlaneDepth. 0: a point light.
+    double areaLightRadius = 0.0;
+    double areaLightPlaneDepth = 0.0;
     /// JSON text stored in the file.
     std::string metadata = "{}";
 };

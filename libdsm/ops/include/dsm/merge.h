@@ -43,8 +43,7 @@ struct MergeOptions {
     /// VisibilityProductOptions); unset = tolerance / 16, at least 2^-20.
     std::optional<double> maxInterpolationError;
     /// zlib level 0..9 of the output; unset (automatic) = Product: 6; Stitch:
-    /// the level the inputs' tiles were written with (found by re-encoding a
-    /// few of them), 6 when none can be recognised.
+    /// the level the inputs' headers record (format 1.1), 6 for 1.0 inputs.
     std::optional<int> zlibLevel;
 };
 

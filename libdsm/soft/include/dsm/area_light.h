@@ -29,9 +29,10 @@ struct DSM_API AreaLightSize {
 ///   A map built for an area light of radius R (scene `area_radius`, see
 ///   spec/scene.md §3.2) has its projection centre pushed back by d behind
 ///   the light's centre, so the light's plane is light-space z = d and the map
-///   sees whatever any point of the light sees. The map does not record d: it
-///   follows from the LightCamera and the radius the map was built for,
-///   d = R / min(xmax, -xmin, ymax, -ymin) (the same formula as
+///   sees whatever any point of the light sees. A map of format 1.1 records R
+///   and d in its header (MapInfo::areaLightRadius, areaLightPlaneDepth); for
+///   older maps d follows from the LightCamera and the radius the map was
+///   built for, d = R / min(xmax, -xmin, ymax, -ymin) (the same formula as
 ///   dsm::lightCamera). The factories derive it that way unless `planeDepth`
 ///   is given (needed when the light is smaller than the one the map was built
 ///   for, since the plane stays where the map's push-back put it).

@@ -1,0 +1,227 @@
+// Format 1.1 tile coding: value steps chosen from the tolerance, the stated
+// bound holding for the values as stored, bit-exact round trips of coded
+// tiles (with and without value steps), 1.0 files still read, and the codec,
+// its level and the area light recorded in the header.
+#include <dsm/dsm.h>
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <random>
+#include <vector>
+
+#include "map_fixtures.h"
+#include "oracle.h"
+#include "temp_dir.h"
+
+namespace {
+
+using dsm::DeepShadowMap;
+using dsm::VisibilityFunction;
+using dsm::WriterOptions;
+using dsm::test::Image;
+using dsm::test::TempDir;
+
+WriterOptions smallMap(double tolerance) {
+    WriterOptions o;
+    o.tileSize = 4;
+    o.channels = 3;
+    o.counts = true;
+    o.maxLayers = 3;
+    o.tolerance = tolerance;
+    return o;
+}
+
+Image randomImage(std::uint32_t width, std::uint32_t height, std::uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    return dsm::test::makeImage(width, height, [&](std::uint32_t, std::uint32_t) {
+        if (std::bernoulli_distribution(0.15)(rng)) return VisibilityFunction(3, true);
+        const int channels = std::bernoulli_distribution(0.5)(rng) ? 3 : 1;
+        const int layers = std::uniform_int_distribution<int>(1, 3)(rng);
+        return dsm::test::randomFunction(rng, channels, true, layers, 9);
+    });
+}
+
+// The largest |a - b| over both functions' vertex depths, just before them and
+// midway between them, per channel and per layer.
+double largestDifference(const dsm::VisibilityView& a, const dsm::VisibilityView& b) {
+    std::vector<double> probes;
+    for (const auto* f : {&a, &b})
+        for (float z : f->depths()) {
+            probes.push_back(z);
+            probes.push_back(std::nextafter(z, -1.0f));
+        }
+    std::sort(probes.begin(), probes.end());
+    const std::size_t n = probes.size();
+    for (std::size_t i = 0; i + 1 < n; ++i) probes.push_back(0.5 * (probes[i] + probes[i + 1]));
+    double worst = 0.0;
+    const int channels = std::max(a.channels(), b.channels());
+    for (std::size_t layer = 0; layer < a.layerCount(); ++layer)
+        for (double z : probes)
+            for (int c = 0; c < channels; ++c)
+                worst = std::max(worst, std::abs(a.evaluateLayer(layer, z, std::min(c, a.channels() - 1)) -
+                                                 b.evaluateLayer(layer, z, std::min(c, b.channels() - 1))));
+    return worst;
+}
+
+}  // namespace
+
+TEST(TileCoding, ValueStepIsThePowerOfTwoWithinAnEighthOfTheTolerance) {
+    EXPECT_EQ(dsm::valueStep(0.0), 0.0);
+    EXPECT_EQ(dsm::valueStep(-1.0), 0.0);
+    EXPECT_EQ(dsm::valueStep(std::nan("")), 0.0);
+    EXPECT_EQ(dsm::valueStep(0x1p-22), 0.0);      // an eighth of it is below 2^-24
+    EXPECT_EQ(dsm::valueStep(0x1p-21), 0x1p-24);  // the finest step
+    EXPECT_EQ(dsm::valueStep(0.01), 0x1p-10);     // 0.00125 -> 2^-10 = 0.00098...
+    EXPECT_EQ(dsm::valueStep(0.125), 0x1p-6);
+    EXPECT_EQ(dsm::valueStep(100.0), 0.5);        // never coarser than 1/2
+    EXPECT_EQ(dsm::compressorTolerance(0.125), 0.125 - 0x1p-7);
+    EXPECT_EQ(dsm::compressorTolerance(0.0), 0.0);
+}
+
+TEST(TileCoding, RoundedValuesStayInRangeAndNonIncreasing) {
+    std::mt19937_64 rng(3);
+    for (int i = 0; i < 200; ++i) {
+        const VisibilityFunction f = dsm::test::randomFunction(rng, 3, true, 2, 12);
+        const VisibilityFunction r = dsm::roundValues(f, 0x1p-3);
+        EXPECT_NO_THROW(r.validate());
+        ASSERT_EQ(r.size(), f.size());
+        for (std::size_t v = 0; v < f.size(); ++v) {
+            EXPECT_EQ(r.z(v), f.z(v));
+            EXPECT_EQ(r.count(v), f.count(v));
+            for (int c = 0; c < 3; ++c) {
+                EXPECT_LE(std::abs(double(r.value(v, c)) - f.value(v, c)), 0x1p-4);
+                EXPECT_EQ(std::fmod(double(r.value(v, c)), 0x1p-3), 0.0);
+            }
+        }
+    }
+}
+
+// What the builder does: compress with compressorTolerance(epsilon), hand the
+// result to a writer that stores values to the level's step. Read back, every
+// stored function is within the stated epsilon of the input function.
+TEST(TileCoding, TheStatedToleranceHoldsForTheValuesAsStored) {
+    TempDir dir;
+    std::mt19937_64 rng(17);
+    for (double tolerance : {0.003, 0.02, 0.1, 0.3}) {
+        const std::uint32_t width = 9, height = 7;
+        std::vector<VisibilityFunction> inputs;
+        Image image;
+        image.width = width;
+        image.height = height;
+        dsm::CompressorOptions co;
+        co.tolerance = dsm::compressorTolerance(tolerance);
+        co.channels = 3;
+        co.keepCounts = true;
+        dsm::Compressor compressor(co);
+        for (std::uint32_t p = 0; p < width * height; ++p) {
+            VisibilityFunction input = dsm::test::randomFunction(rng, 3, true, 1, 60);
+            for (std::size_t i = 0; i < input.size(); ++i) compressor.push(input.z(i), input.values(i), input.count(i));
+            image.pixels.push_back(compressor.finish());
+            inputs.push_back(std::move(input));
+        }
+        WriterOptions o = smallMap(tolerance);
+        o.maxLayers = 1;
+        o.quantiseValues = true;
+        o.mipLevels = 1;
+        const auto path = dir / "bound.dsm";
+        dsm::test::writeMap(path, o, image);
+        const auto map = DeepShadowMap::open(path.string());
+        const dsm::LevelInfo& level = map->info().levels.at(0);
+        ASSERT_EQ(level.valueStep, dsm::valueStep(tolerance));
+        ASSERT_GT(level.valueStep, 0.0);
+        ASSERT_EQ(level.tolerance, tolerance);
+        double worst = 0.0;
+        for (std::uint32_t y = 0; y < height; ++y)
+            for (std::uint32_t x = 0; x < width; ++x) {
+                const dsm::PixelFunction stored = map->pixel(0, x, y);
+                for (float v : stored->allValues()) EXPECT_EQ(std::fmod(double(v), level.valueStep), 0.0);
+                worst = std::max(worst, largestDifference(inputs[y * width + x].view(), stored.view()));
+            }
+        EXPECT_LE(worst, tolerance + 1e-12) << "tolerance " << tolerance;
+        // The rounding is not free: without the room the compressor leaves
+        // for it, the bound would be at risk.
+        EXPECT_GT(worst, tolerance - level.valueStep) << "tolerance " << tolerance;
+    }
+}
+
+// Coded tiles give back every function bit for bit: without a value step any
+// float32 values, with one the multiples of it the writer stores.
+TEST(TileCoding, CodedTilesRoundTripBitForBit) {
+    TempDir dir;
+    const Image image = randomImage(11, 6, 5);
+    for (bool quantise : {false, true}) {
+        for (int zlibLevel : {0, 6}) {
+            WriterOptions o = smallMap(0.05);
+            o.quantiseValues = quantise;
+            o.zlibLevel = zlibLevel;
+            const auto path = dir / "coded.dsm";
+            dsm::test::writeMap(path, o, image, 7);
+            EXPECT_NO_THROW(dsm::validate(path.string()));
+            const auto map = DeepShadowMap::open(path.string());
+            EXPECT_TRUE(map->info().codedTiles);
+            const double step = map->info().levels[0].valueStep;
+            EXPECT_EQ(step, quantise ? dsm::valueStep(0.05) : 0.0);
+            for (std::uint32_t y = 0; y < image.height; ++y)
+                for (std::uint32_t x = 0; x < image.width; ++x) {
+                    const VisibilityFunction want = dsm::roundValues(image.at(x, y), step);
+                    EXPECT_TRUE(dsm::test::sameFunction(map->pixel(0, x, y).view(), want, true))
+                        << "pixel " << x << "," << y << " quantise " << quantise << " zlib " << zlibLevel;
+                }
+        }
+    }
+}
+
+// The same content written as 1.0 and as 1.1 reads back the same, and the
+// 1.1 tiles are smaller.
+TEST(TileCoding, FormatOneZeroFilesStillReadAndOneOneTilesAreSmaller) {
+    TempDir dir;
+    const Image image = randomImage(16, 16, 9);
+    WriterOptions o = smallMap(0.0);
+    o.formatMinor = 0;
+    dsm::test::writeMap(dir / "old.dsm", o, image);
+    o.formatMinor = 1;
+    dsm::test::writeMap(dir / "new.dsm", o, image);
+    const auto older = DeepShadowMap::open((dir / "old.dsm").string());
+    const auto newer = DeepShadowMap::open((dir / "new.dsm").string());
+    EXPECT_EQ(older->info().versionMinor, 0);
+    EXPECT_FALSE(older->info().codedTiles);
+    EXPECT_EQ(older->info().codecLevel, -1);  // 1.0 records no level
+    EXPECT_EQ(newer->info().versionMinor, 1);
+    EXPECT_TRUE(newer->info().codedTiles);
+    EXPECT_EQ(newer->info().codecLevel, 6);
+    for (unsigned l = 0; l < older->info().levels.size(); ++l) {
+        const dsm::LevelInfo& L = older->info().levels[l];
+        EXPECT_LT(newer->info().levels[l].storedBytes, L.storedBytes) << "level " << l;
+        for (std::uint32_t y = 0; y < L.height; ++y)
+            for (std::uint32_t x = 0; x < L.width; ++x)
+                EXPECT_TRUE(dsm::test::sameFunction(newer->pixel(l, x, y).view(),
+                                                    older->pixel(l, x, y)->toFunction(), true))
+                    << "level " << l << " pixel " << x << "," << y;
+    }
+}
+
+TEST(TileCoding, TheHeaderRecordsTheCodecLevelAndTheAreaLight) {
+    TempDir dir;
+    const Image image = randomImage(5, 5, 2);
+    WriterOptions o = smallMap(0.01);
+    o.zlibLevel = 3;
+    o.areaLightRadius = 0.25;
+    o.areaLightPlaneDepth = 0.75;
+    dsm::test::writeMap(dir / "light.dsm", o, image);
+    const auto map = DeepShadowMap::open((dir / "light.dsm").string());
+    EXPECT_EQ(map->info().codec, dsm::TileCodec::Zlib);
+    EXPECT_EQ(map->info().codecLevel, 3);
+    EXPECT_EQ(map->info().areaLightRadius, 0.25);
+    EXPECT_EQ(map->info().areaLightPlaneDepth, 0.75);
+
+    o.formatMinor = 0;  // 1.0 has no place for them
+    EXPECT_THROW(dsm::test::writeMap(dir / "old.dsm", o, image), dsm::Error);
+    o.areaLightRadius = 0.0;
+    o.quantiseValues = true;
+    EXPECT_THROW(dsm::test::writeMap(dir / "old.dsm", o, image), dsm::Error);
+    o.formatMinor = 2;
+    o.quantiseValues = false;
+    EXPECT_THROW(dsm::test::writeMap(dir / "new.dsm", o, image), dsm::Error);
+}
