@@ -396,6 +396,7 @@ inline double directBilinear(const Inputs& in, const Query& q) {
 /// A box lookup; `level` < 0 chooses the levels from the width.
 LookupOptions boxOptions(double width, int level) {
     LookupOptions o;
+    o.bias = 0.0;  // the stored functions exactly, as the direct evaluation reads them
     o.filter = PixelFilter::Box;
     o.filterWidth = width;
     if (level >= 0) o.level = static_cast<unsigned>(level);

@@ -269,6 +269,7 @@ int main(int argc, char** argv) {
         MapHandle* h = system->open(path);
         const auto map = system->map(h);
         LookupOptions bilinear;
+        bilinear.bias = 0.0;  // the stored functions exactly, as the direct evaluation reads them
         bilinear.level = 0;
         const DirectMap direct(*map);
         ShadowSystemOptions bigTable = wide;
@@ -315,9 +316,11 @@ int main(int argc, char** argv) {
         printRate("ShadowSystem::lookup, one point", rScan, 0, "");
 
         LookupOptions gaussian;
+        gaussian.bias = 0.0;
         gaussian.filter = PixelFilter::Gaussian;
         gaussian.filterWidth = 4.0;
         LookupOptions blended;
+        blended.bias = 0.0;
         blended.filterWidth = 3.0;  // level auto: levels 1 and 2 blended
         const Rate rGauss = singleRate(*system, h, random, gaussian, cfg.repeat, checksum);
         const Rate rBlend = singleRate(*system, h, random, blended, cfg.repeat, checksum);

@@ -19,7 +19,7 @@ int main(int argc, char** argv) {
     auto h = sys->open(argv[1]);
     auto info = sys->map(h)->info();
     auto th = sys->createThread();
-    LookupOptions lo; lo.level = 0; LookupResult r;
+    LookupOptions lo; lo.level = 0; lo.bias = 0.0; LookupResult r;
     for (uint32_t y = 0; y < info.height; y += info.tileSize) for (uint32_t x = 0; x < info.width; x += info.tileSize)
         sys->lookup(*th, h, LookupSpace::raster, {x + 0.5, y + 0.5, 1.0}, lo, r);
     std::mt19937_64 rng(4);

@@ -39,6 +39,7 @@ int main(int argc, char** argv) {
         pts.push_back({x + u(rng), y + u(rng), f->z(0) + (f->z(f->size()-1) - f->z(0)) * u(rng)});
     }
     LookupOptions o;
+    o.bias = 0.0;  // as the direct evaluation
     double sum = 0;
     auto t0 = std::chrono::steady_clock::now();
     if (!strcmp(mode, "direct")) {

@@ -64,6 +64,7 @@ Json studyCacheBudget(const Config& config, const Scene& scene, const std::strin
             reader.cache = TileCache::create(static_cast<std::size_t>(fraction * double(decoded)));
             const auto map = DeepShadowMap::open(path.string(), reader);
             LookupOptions options;  // bilinear at level 0: the level with the most tiles
+            options.bias = 0.0;
             LookupContext context(map);
             double sink = 0.0;
             const double seconds = timed([&] {

@@ -58,6 +58,7 @@ Json studyDeepVersusNormal(const Config& config, const Scene& scene, const std::
     out["deep_resolution"] = config.resolution;
     const auto reference = DeepShadowMap::open(gridMapPath(config, name, config.referenceSpp, -1.0).string());
     LookupOptions pixel;
+    pixel.bias = 0.0;  // the maps as stored: the study measures them, not a receiver's bias
     pixel.level = 0;
     const std::vector<Query> queries = makeQueries(*reference, config.queries, true, 23);
     const std::vector<double> truth = lookupAll(reference, queries, pixel);
@@ -135,6 +136,7 @@ Json studyFilterWidth(const Config& config, const Scene& scene, const std::strin
     Json rows = Json::array();
     for (double width = 1.0; width <= config.resolution / 2.0; width *= 2.0) {
         LookupOptions mipmapped;
+        mipmapped.bias = 0.0;
         mipmapped.filterWidth = width;
         LookupOptions level0 = mipmapped;
         level0.level = 0;

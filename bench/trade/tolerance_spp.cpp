@@ -96,6 +96,7 @@ Json studyToleranceAndSpp(const Config& config, const Scene& scene, const std::s
     out["reference_file_bytes"] = reference->info().fileBytes;
 
     LookupOptions bilinear;  // box of width 1 at level 0: bilinear between pixel centres
+    bilinear.bias = 0.0;     // the maps as stored: the study measures them, not a receiver's bias
     bilinear.level = 0;
     const std::vector<Query> queries = makeQueries(*reference, config.queries, false, 11);
     const std::vector<double> truth = lookupAll(reference, queries, bilinear);
