@@ -60,7 +60,6 @@ struct RayCaster::Impl {
     explicit Impl(const Scene& scene) : surfaces(scene) {}
 
     ScenePrimitives surfaces;
-    std::vector<Vec3> motion;  // per object, for the volumes
     std::vector<VolumeData> volumes;
     std::vector<Node> nodes;
 
@@ -179,7 +178,6 @@ RayCaster::RayCaster(const Scene& scene, Surfaces surfaces) : impl_(std::make_un
     Impl& s = *impl_;
     for (std::uint32_t o = 0; o < scene.objects.size(); ++o) {
         const SceneObject& object = scene.objects[o];
-        s.motion.push_back(object.motion);
         const auto* g = std::get_if<Volume>(&object.geometry);
         if (!g) continue;
         const std::string what = detail::concat("object ", o, " '", detail::clip(object.name), "'");
@@ -239,7 +237,7 @@ void RayCaster::volumeSamples(const Vec3& origin, const Vec3& direction, double 
     };
     std::vector<Span> spans;
     for (const VolumeData& v : s.volumes) {
-        const Vec3 o = transformPoint(v.worldToObject, sub(origin, scale(s.motion[v.object], time)));
+        const Vec3 o = transformPoint(v.worldToObject, sub(origin, scale(s.surfaces.motion(v.object), time)));
         const Vec3 d = transformVector(v.worldToObject, direction);
         const Vec3 inv{1.0 / d[0], 1.0 / d[1], 1.0 / d[2]};
         double t0, t1;

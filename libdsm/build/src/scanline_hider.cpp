@@ -7,7 +7,7 @@ DSM_NAMESPACE_BEGIN
 
 namespace {
 
-constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kInf = Bounds3::kInf;
 
 // Raster bounds are widened by this much (relative, at least this many
 // pixels), so that rounding in the projection never leaves out a sample

@@ -86,6 +86,9 @@ public:
     std::vector<Primitive>& all() { return primitives_; }
     std::size_t size() const { return primitives_.size(); }
 
+    /// How far an object moves over the shutter (its linear motion), per object index.
+    const Vec3& motion(std::uint32_t object) const { return motion_[object]; }
+
     /// World bounds over the whole shutter: at time 0 and moved to time 1.
     Bounds3 bounds(const Primitive& p) const;
 
