@@ -269,6 +269,25 @@ void checkLayerCount(std::uint8_t layers, std::uint32_t n, std::size_t p, const 
         fail(concat(shape.pixelAt(p), ": ", int(layers), " layers but ", n, " vertices"), ErrorCode::corrupt);
 }
 
+// Reads each pixel's layer count (one byte, from `readLayers`), checks it
+// against the pixel's vertices and sets the value and layer starts of the
+// records that follow; `layerTotal` counts the layers beyond each pixel's
+// first, `valueTotal` the values. Shared by both tile layouts.
+template <class ReadLayers>
+void readLayerCounts(ReadLayers readLayers, std::vector<PixelRecord>& records, const TileShape& shape,
+                     const TileLayout& layout, const Fail& fail, std::uint64_t& layerTotal,
+                     std::uint64_t& valueTotal) {
+    for (std::size_t p = 0; p + 1 < records.size(); ++p) {
+        const std::uint8_t layers = readLayers();
+        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
+        checkLayerCount(layers, n, p, shape, layout, fail);
+        layerTotal += layers - 1u;
+        valueTotal += std::uint64_t(n) * records[p].channels;
+        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
+        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
+    }
+}
+
 DecodedTile parsePlainTile(std::span<const std::uint8_t> raw, const TileSummary& summary, const TileShape& shape,
                            const TileLayout& layout, const ReaderOptions& limits, const Fail& fail) {
     const std::size_t pixels = shape.pixels;
@@ -287,18 +306,11 @@ DecodedTile parsePlainTile(std::span<const std::uint8_t> raw, const TileSummary&
     if (previous != summary.vertexCount)
         fail(concat("pixel table holds ", previous, " vertices, the directory ", summary.vertexCount), ErrorCode::corrupt);
     for (std::size_t p = 0; p < pixels; ++p) readPixelFlag(r.u8(), records[p], p, shape, layout, fail);
-    std::uint64_t layerTotal = 0, valueTotal = 0, expected = pixelTableBytes(pixels);
+    std::uint64_t layerTotal = 0, valueTotal = 0;
+    readLayerCounts([&] { return r.u8(); }, records, shape, layout, fail, layerTotal, valueTotal);
     const std::uint64_t perVertexExtra = 4 + (layout.hasCounts ? 4 : 0);
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint8_t layers = r.u8();
-        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
-        checkLayerCount(layers, n, p, shape, layout, fail);
-        layerTotal += layers - 1u;
-        valueTotal += std::uint64_t(n) * records[p].channels;
-        expected += 4ull * (layers - 1u) + n * (perVertexExtra + 4ull * records[p].channels);
-        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
-        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
-    }
+    const std::uint64_t expected =
+        pixelTableBytes(pixels) + 4 * layerTotal + previous * perVertexExtra + 4 * valueTotal;
     if (expected != raw.size())
         fail(concat("tile holds ", raw.size(), " bytes but its pixel table describes ", expected), ErrorCode::corrupt);
     r.seek(pixelTableBytes(pixels));
@@ -342,15 +354,7 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
              ErrorCode::corrupt);
     for (std::size_t p = 0; p < pixels; ++p) readPixelFlag(r.byte(), records[p], p, shape, layout, fail);
     std::uint64_t layerTotal = 0, valueTotal = 0;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint8_t layers = r.byte();
-        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
-        checkLayerCount(layers, n, p, shape, layout, fail);
-        layerTotal += layers - 1u;
-        valueTotal += std::uint64_t(n) * records[p].channels;
-        records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
-        records[p + 1].layerStart = static_cast<std::uint32_t>(layerTotal);
-    }
+    readLayerCounts([&] { return r.byte(); }, records, shape, layout, fail, layerTotal, valueTotal);
     if (!r.ok()) fail("tile data is truncated in its pixel table", ErrorCode::corrupt);
     // Every integer still to come takes at least one byte: a check of the
     // totals against what is left bounds what is allocated by the raw size.
