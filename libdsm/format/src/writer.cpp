@@ -63,7 +63,8 @@ struct MapWriter::Impl {
         const format::TileLayout layout{options.channels, options.counts, options.maxLayers, options.formatMinor >= 1,
                                         L.info.valueStep};
         if (L.info.valueStep > 0.0)
-            for (VisibilityFunction& f : pixels) f = roundValues(f, L.info.valueStep);
+            for (VisibilityFunction& f : pixels)
+                if (!f.empty()) f = roundValues(f, L.info.valueStep);
         format::EncodedTile encoded = format::encodeTile(pixels, layout, options.zlibLevel);
         if (!encoded.stored.empty()) {
             encoded.summary.offset = offset;
@@ -224,20 +225,23 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const Visibil
         throw Error(ErrorCode::argument, concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
     for (std::size_t p = 0; p < pixels.size(); ++p) {
         const VisibilityFunction& f = pixels[p];
-        const std::string pixelWhere =
-            concat(where, " pixel ", tx * s.options.tileSize + p % w, ",", ty * s.options.tileSize + p / w, ": ");
+        // Built only for a message: formatting it for every pixel cost more
+        // than encoding the tile.
+        const auto pixelWhere = [&] {
+            return concat(where, " pixel ", tx * s.options.tileSize + p % w, ",", ty * s.options.tileSize + p / w, ": ");
+        };
         if (f.channels() > s.options.channels)
-            throw Error(ErrorCode::argument, concat(pixelWhere, "RGB function in a monochrome map"));
+            throw Error(ErrorCode::argument, concat(pixelWhere(), "RGB function in a monochrome map"));
         if (s.options.counts && !f.hasCounts() && !f.empty())
             throw Error(ErrorCode::argument,
-                        concat(pixelWhere, "the map stores sample counts but the function has none"));
+                        concat(pixelWhere(), "the map stores sample counts but the function has none"));
         if (static_cast<int>(f.layerCount()) > s.options.maxLayers)
             throw Error(ErrorCode::argument,
-                        concat(pixelWhere, f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
+                        concat(pixelWhere(), f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
         try {
             f.validate();
         } catch (const Error& e) {
-            throw Error(e.code(), pixelWhere + e.what());
+            throw Error(e.code(), pixelWhere() + e.what());
         }
     }
     std::vector<VisibilityFunction> copy(pixels.begin(), pixels.end());
