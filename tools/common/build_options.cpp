@@ -49,6 +49,10 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
         ->capture_default_str();
     app.add_option("-m,--mip-levels", text.mipLevels, "Mip levels: auto (full pyramid) or N (1 = none)")
         ->capture_default_str();
+    app.add_option("--level-tolerance-factor", options.levelToleranceFactor,
+                   "Each coarser mip level's tolerance = the previous one's x this, in (0, 16]")
+        ->check(finiteNumberIn(0.0, 16.0, LowerBound::Exclusive))
+        ->capture_default_str();
     app.add_option("-t,--tile-size", options.tileSize, "Tile size: a power of two, 2..4096")
         ->check(integerIn(2, 4096))
         ->capture_default_str();
@@ -119,6 +123,7 @@ std::vector<std::string> buildOptionArguments(const BuildOptions& options, std::
     args.insert(args.end(), {"--filter", filterName(options.filter)});
     args.insert(args.end(), {"--filter-width", exactText(options.filterWidth)});
     args.insert(args.end(), {"--mip-levels", options.mipLevels ? std::to_string(*options.mipLevels) : "auto"});
+    args.insert(args.end(), {"--level-tolerance-factor", exactText(options.levelToleranceFactor)});
     args.insert(args.end(), {"--tile-size", std::to_string(options.tileSize)});
     args.insert(args.end(), {"--mtsm-layers", std::to_string(options.mtsmLayers)});
     args.insert(args.end(), {"--sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"});

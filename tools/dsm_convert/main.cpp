@@ -135,6 +135,11 @@ int main(int argc, char** argv) {
                                 ".exr -> .dsm: mip levels, 0 = full pyramid (default), 1 = none")
                      ->type_name("N")
                      ->check(integerIn(0, kMaxMipLevel + 1));
+    auto* levelFactor =
+        app.add_option("--level-tolerance-factor", importOptions.levelToleranceFactor,
+                       ".exr -> .dsm: each coarser mip level's tolerance = the previous one's x this (default 0.5)")
+            ->type_name("F")
+            ->check(finiteNumberIn(0.0, 16.0, LowerBound::Exclusive));
     bool quiet = false;
     app.add_flag("-q,--quiet", quiet, "Print nothing on success");
     cameraMap->excludes(fov)->excludes(ortho);
@@ -146,8 +151,8 @@ int main(int argc, char** argv) {
         if (to == Kind::Unknown) throw CLI::ValidationError("OUT", "'" + output + "' must end in .dsm or .exr");
         from = to == Kind::Map ? Kind::Exr : Kind::Map;
         const auto& exportOnly = {level, tiled, exrTile, deviation};
-        const auto& importOnly = {tolerance, linear, cameraMap, fov, ortho, mapTile, mips, partOption, viewOption,
-                                  channelsOption};
+        const auto& importOnly = {tolerance, linear, cameraMap, fov, ortho, mapTile, mips, levelFactor, partOption,
+                                  viewOption, channelsOption};
         for (CLI::Option* o : to == Kind::Exr ? importOnly : exportOnly)
             if (o->count())
                 throw CLI::ValidationError(o->get_name(), std::string("applies only to ") +

@@ -153,6 +153,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     w.filterWidth = options.filterWidth;
     w.tolerance = tolerance;
     w.mipLevels = options.mipLevels;
+    w.levelToleranceFactor = options.levelToleranceFactor;
     w.zlibLevel = options.zlibLevel;
     w.quantiseValues = true;
     if (light.areaLightRadius > 0.0 && camera.projection == Projection::Perspective) {

@@ -120,6 +120,7 @@ ExrImportReport importDeepExr(const std::string& exrPath, const std::string& dsm
         // the writer derives for every level stay true.
         w.tolerance = report.errorBound;
         w.mipLevels = options.mipLevels;
+        w.levelToleranceFactor = options.levelToleranceFactor;
         w.zlibLevel = options.zlibLevel;
         if (report.fromVertexSamples) {
             const auto* counts = findAttribute<Imf::IntAttribute>(h, "dsm:counts");

@@ -122,6 +122,7 @@ FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& options, FarmG
             {"filter", filterName(options.filter)},
             {"filter_width", exactText(options.filterWidth)},
             {"mip_levels", options.mipLevels ? std::to_string(*options.mipLevels) : "auto"},
+            {"level_tolerance_factor", exactText(options.levelToleranceFactor)},
             {"tile_size", std::to_string(options.tileSize)},
             {"mtsm_layers", std::to_string(options.mtsmLayers)},
             {"counts", options.counts ? "true" : "false"},

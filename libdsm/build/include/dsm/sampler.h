@@ -46,6 +46,11 @@ struct BuildOptions {
     double filterWidth = 2.0;
     /// As WriterOptions::mipLevels: 1 = no mip-maps, N levels; unset = full pyramid.
     std::optional<unsigned> mipLevels;
+    /// As WriterOptions::levelToleranceFactor: each coarser level's tolerance
+    /// is the previous one's times this, finite and > 0 (0.5: every level's
+    /// error bound stays within 2 x tolerance; 1: smaller pyramids, the bound
+    /// grows by one tolerance per level; docs/dsm-build.md measures both).
+    double levelToleranceFactor = 0.5;
     std::uint32_t tileSize = 32;
     /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts).
     int mtsmLayers = 1;

@@ -166,6 +166,9 @@ struct ExrImportOptions {
     std::uint32_t tileSize = 32;
     /// As WriterOptions::mipLevels (unset = full pyramid).
     std::optional<unsigned> mipLevels;
+    /// As WriterOptions::levelToleranceFactor (docs/dsm-convert.md measures
+    /// what it trades on sparse camera images).
+    double levelToleranceFactor = 0.5;
     int zlibLevel = 6;
 };
 
