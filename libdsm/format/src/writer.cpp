@@ -1,5 +1,6 @@
 #include "dsm/writer.h"
 
+#include <algorithm>
 #include <bit>
 #include <cmath>
 #include <map>
@@ -57,6 +58,9 @@ struct MapWriter::Impl {
         return std::min(options.tileSize, levelExtent - t * options.tileSize);
     }
 
+    // `pixels` empty stands for a tile whose pixels are all empty: the parts
+    // of a region build and sparse maps are mostly such tiles, and they cost
+    // nothing to store or average.
     void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>& pixels) {
         Level& L = levels[level];
         const std::uint32_t index = ty * L.info.tilesX + tx;
@@ -65,7 +69,8 @@ struct MapWriter::Impl {
         if (L.info.valueStep > 0.0)
             for (VisibilityFunction& f : pixels)
                 if (!f.empty()) f = roundValues(f, L.info.valueStep);
-        format::EncodedTile encoded = format::encodeTile(pixels, layout, options.zlibLevel);
+        format::EncodedTile encoded =
+            pixels.empty() ? format::EncodedTile{} : format::encodeTile(pixels, layout, options.zlibLevel);
         if (!encoded.stored.empty()) {
             encoded.summary.offset = offset;
             writeBytes(encoded.stored.data(), encoded.stored.size());
@@ -84,11 +89,29 @@ struct MapWriter::Impl {
     void downsample(unsigned level, std::uint32_t tx, std::uint32_t ty, const std::vector<VisibilityFunction>& pixels) {
         const Level& child = levels[level];
         const Level& parent = levels[level + 1];
-        const std::uint32_t T = options.tileSize;
         const std::uint32_t ptx = tx / 2, pty = ty / 2;
         const std::uint32_t parentIndex = pty * parent.info.tilesX + ptx;
-        const std::uint32_t pw = tileExtent(parent.info.width, ptx), ph = tileExtent(parent.info.height, pty);
         PendingTile& p = pending[level + 1][parentIndex];
+        // Coarser pixels over an empty child tile are empty (averageFunctions()
+        // of empty functions), as the parent's pixels start.
+        if (!pixels.empty()) averageIntoParent(level, tx, ty, pixels, p);
+        const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *
+                                       (std::min(2 * pty + 2, child.info.tilesY) - 2 * pty);
+        if (++p.childrenReceived == expected) {
+            std::vector<VisibilityFunction> done = std::move(p.pixels);
+            pending[level + 1].erase(parentIndex);
+            acceptTile(level + 1, ptx, pty, done);
+        }
+    }
+
+    // The coarser pixels over tile (tx, ty) of `level`, averaged into the parent.
+    void averageIntoParent(unsigned level, std::uint32_t tx, std::uint32_t ty,
+                           const std::vector<VisibilityFunction>& pixels, PendingTile& p) {
+        const Level& child = levels[level];
+        const Level& parent = levels[level + 1];
+        const std::uint32_t T = options.tileSize;
+        const std::uint32_t ptx = tx / 2, pty = ty / 2;
+        const std::uint32_t pw = tileExtent(parent.info.width, ptx), ph = tileExtent(parent.info.height, pty);
         if (p.pixels.empty()) p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
 
         const std::uint32_t cw = tileExtent(child.info.width, tx);
@@ -122,13 +145,6 @@ struct MapWriter::Impl {
                 p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)] =
                     averageFunctions(block, weights, tolerance, options.counts);
             }
-        }
-        const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *
-                                       (std::min(2 * pty + 2, child.info.tilesY) - 2 * pty);
-        if (++p.childrenReceived == expected) {
-            std::vector<VisibilityFunction> done = std::move(p.pixels);
-            pending[level + 1].erase(parentIndex);
-            acceptTile(level + 1, ptx, pty, done);
         }
     }
 };
@@ -244,7 +260,9 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const Visibil
             throw Error(e.code(), pixelWhere() + e.what());
         }
     }
-    std::vector<VisibilityFunction> copy(pixels.begin(), pixels.end());
+    const bool allEmpty = std::all_of(pixels.begin(), pixels.end(), [](const VisibilityFunction& f) { return f.empty(); });
+    std::vector<VisibilityFunction> copy;
+    if (!allEmpty) copy.assign(pixels.begin(), pixels.end());
     s.acceptTile(0, tx, ty, copy);
 } catch (const Error& e) {
     throw e.withFile(impl_->path);
