@@ -47,44 +47,88 @@ double since(Clock::time_point start) { return std::chrono::duration<double>(Clo
 
 }  // namespace
 
-VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
-                                   const CompressorOptions& options, PixelTimings* timings) {
-    Compressor compressor(options);
-    std::vector<VisibilityFunction> taus;
-    taus.reserve(rays.size());
-    BufferingSink swept(options.channels);
-    float zStart = -std::numeric_limits<float>::infinity();
-    for (;;) {
-        auto start = Clock::now();
-        taus.clear();
+struct PixelBuilder::Impl {
+    explicit Impl(const CompressorOptions& o) : options(o), compressor(o), swept(o.channels) {}
+
+    // taus[k] = the transmittance of rays[k] beyond zStart, views[k] a view of it.
+    void buildTransmittances(Span<const SampleRay> rays, float zStart, PixelTimings* timings) {
+        const auto start = Clock::now();
+        if (taus.size() < rays.size()) taus.resize(rays.size());  // never shrunk: each keeps its storage
+        views.clear();
         for (std::size_t k = 0; k < rays.size(); ++k) {
             try {
-                taus.push_back(transmittance(rays[k], options.channels, options.keepCounts, zStart));
+                transmittances.build(rays[k], options.channels, options.keepCounts, zStart, taus[k]);
             } catch (const Error& e) {
                 throw Error(e.code(), detail::concat("ray ", k, ": ", e.what()));
             }
-            if (timings) timings->transmittanceVertices += taus.back().size();
+            views.push_back(taus[k].view());
         }
-        if (timings) {
-            timings->transmittanceSeconds += since(start);
-            start = Clock::now();
-        }
-        swept.clear();
-        sweep(taus, weights, options.channels, swept);
-        if (timings) {
-            timings->sweepSeconds += since(start);
-            start = Clock::now();
-        }
-        const bool complete = swept.replay(compressor);
-        if (timings) timings->compressionSeconds += since(start);
-        if (complete) break;
-        // The compressor ended a layer: everything up to its depth is in it.
-        zStart = compressor.layerEndDepth();
+        if (timings) timings->transmittanceSeconds += since(start);
     }
-    const auto start = Clock::now();
-    VisibilityFunction result = compressor.finish();
-    if (timings) timings->compressionSeconds += since(start);
-    return result;
+
+    VisibilityFunction run(Span<const VisibilityView> first, Span<const SampleRay> rays, Span<const double> weights,
+                           PixelTimings* timings) {
+        // An error may have left the compressor inside a function: drop that.
+        if (compressorInUse) compressor.finish();
+        compressorInUse = true;
+        Span<const VisibilityView> inputs = first;
+        for (;;) {
+            if (timings)
+                for (const VisibilityView& tau : inputs) timings->transmittanceVertices += tau.size();
+            auto start = Clock::now();
+            swept.clear();
+            sweeper.sweep(inputs, weights, options.channels, swept);
+            if (timings) {
+                timings->sweepSeconds += since(start);
+                start = Clock::now();
+            }
+            const bool complete = swept.replay(compressor);
+            if (timings) timings->compressionSeconds += since(start);
+            if (complete) break;
+            // The compressor ended a layer: everything up to its depth is in
+            // it; the next layer sees what lies beyond.
+            buildTransmittances(rays, compressor.layerEndDepth(), timings);
+            inputs = views;
+        }
+        const auto start = Clock::now();
+        VisibilityFunction result = compressor.finish();
+        compressorInUse = false;
+        if (timings) timings->compressionSeconds += since(start);
+        return result;
+    }
+
+    CompressorOptions options;
+    Compressor compressor;
+    bool compressorInUse = false;
+    TransmittanceBuilder transmittances;
+    Sweeper sweeper;
+    BufferingSink swept;
+    std::vector<VisibilityFunction> taus;
+    std::vector<VisibilityView> views;
+};
+
+PixelBuilder::PixelBuilder(const CompressorOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+PixelBuilder::~PixelBuilder() = default;
+PixelBuilder::PixelBuilder(PixelBuilder&&) noexcept = default;
+PixelBuilder& PixelBuilder::operator=(PixelBuilder&&) noexcept = default;
+
+VisibilityFunction PixelBuilder::build(Span<const SampleRay> rays, Span<const double> weights,
+                                       PixelTimings* timings) {
+    impl_->buildTransmittances(rays, -std::numeric_limits<float>::infinity(), timings);
+    return impl_->run(impl_->views, rays, weights, timings);
+}
+
+VisibilityFunction PixelBuilder::build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
+                                       Span<const double> weights, PixelTimings* timings) {
+    if (transmittances.size() != rays.size())
+        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",
+                                                        rays.size(), " rays"));
+    return impl_->run(transmittances, rays, weights, timings);
+}
+
+VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
+                                   const CompressorOptions& options, PixelTimings* timings) {
+    return PixelBuilder(options).build(rays, weights, timings);
 }
 
 DSM_NAMESPACE_END

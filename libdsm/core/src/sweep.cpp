@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <queue>
 #include <vector>
 
 #include "dsm/error.h"
@@ -32,8 +31,43 @@ constexpr double kCancellationLimit = 1e6;
 
 }  // namespace
 
-std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
-                           int channels, VertexSink& sink) {
+struct Sweeper::Impl {
+    std::vector<double> w;
+    std::vector<std::size_t> next;
+    std::vector<double> slope;
+    std::vector<std::uint32_t> sloped;
+    std::vector<std::uint32_t> slopedAt;
+    std::vector<unsigned char> atZero;
+    std::vector<Event> heap;  // a binary heap under Later: the earliest event on top
+
+    // Input is VisibilityFunction or VisibilityView (the same accessors).
+    template <class Input>
+    std::optional<float> run(Span<const Input> inputs, Span<const double> weights, int channels, VertexSink& sink);
+};
+
+Sweeper::Sweeper() : impl_(std::make_unique<Impl>()) {}
+Sweeper::~Sweeper() = default;
+Sweeper::Sweeper(Sweeper&&) noexcept = default;
+Sweeper& Sweeper::operator=(Sweeper&&) noexcept = default;
+
+std::optional<float> Sweeper::sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
+                                    VertexSink& sink) {
+    return impl_->run(inputs, weights, channels, sink);
+}
+
+std::optional<float> Sweeper::sweep(Span<const VisibilityView> inputs, Span<const double> weights, int channels,
+                                    VertexSink& sink) {
+    return impl_->run(inputs, weights, channels, sink);
+}
+
+std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
+                           VertexSink& sink) {
+    return Sweeper().sweep(inputs, weights, channels, sink);
+}
+
+template <class Input>
+std::optional<float> Sweeper::Impl::run(Span<const Input> inputs, Span<const double> weights, int channels,
+                                        VertexSink& sink) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
     if (inputs.size() != weights.size())
@@ -60,28 +94,31 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
 
     const std::size_t n = inputs.size();
     const std::size_t nc = static_cast<std::size_t>(channels);
-    std::vector<double> w(n);
+    w.resize(n);
     for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
-    std::vector<std::size_t> next(n, 0);
-    std::vector<double> slope(n * nc, 0.0);  // current slope of each input, per channel
+    next.assign(n, 0);
+    slope.assign(n * nc, 0.0);  // current slope of each input, per channel
     // Inputs whose current segment slopes (in any channel of positive weight):
     // an exact recomputation of the slope sum only needs these, and when there
     // are none the sum is exactly 0. Kept in a list with swap-removal.
-    std::vector<std::uint32_t> sloped;
-    std::vector<std::uint32_t> slopedAt(n, UINT32_MAX);
+    sloped.clear();
+    slopedAt.assign(n, UINT32_MAX);
     // Inputs of positive weight whose current value is exactly 0, per channel:
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
-    std::vector<unsigned char> atZero(n * nc, 0);
+    atZero.assign(n * nc, 0);
     std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
     std::size_t positive = 0;
     for (std::size_t k = 0; k < n; ++k) positive += w[k] > 0.0;
 
     // Inputs of weight 0 take part too: they add nothing to the value, but
     // their depths and sample counts belong to the output.
-    std::priority_queue<Event, std::vector<Event>, Later> heap;
+    heap.clear();
     for (std::size_t k = 0; k < n; ++k)
-        if (!inputs[k].empty()) heap.push({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+        if (!inputs[k].empty()) {
+            heap.push_back({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+            std::push_heap(heap.begin(), heap.end(), Later{});
+        }
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
@@ -91,7 +128,7 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
     double zCurrent = 0.0;
 
     while (!heap.empty()) {
-        const float z = heap.top().z;
+        const float z = heap.front().z;
         for (std::size_t c = 0; c < nc; ++c) {
             left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
             left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
@@ -100,10 +137,11 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
         zCurrent = z;
 
         std::uint64_t count = 0;
-        while (!heap.empty() && heap.top().z == z) {
-            const std::size_t k = heap.top().input;
-            heap.pop();
-            const VisibilityFunction& f = inputs[k];
+        while (!heap.empty() && heap.front().z == z) {
+            const std::size_t k = heap.front().input;
+            std::pop_heap(heap.begin(), heap.end(), Later{});
+            heap.pop_back();
+            const Input& f = inputs[k];
             const std::size_t first = next[k];
             std::size_t last = first;
             count += f.count(first);
@@ -146,7 +184,10 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
                 slopedAt[k] = UINT32_MAX;
             }
             next[k] = last + 1;
-            if (more) heap.push({f.z(last + 1), static_cast<std::uint32_t>(k)});
+            if (more) {
+                heap.push_back({f.z(last + 1), static_cast<std::uint32_t>(k)});
+                std::push_heap(heap.begin(), heap.end(), Later{});
+            }
         }
 
         bool step = false;
