@@ -1,5 +1,6 @@
 #include "dsm/build_visibility.h"
 
+#include <algorithm>
 #include <chrono>
 #include <limits>
 #include <vector>
@@ -17,26 +18,33 @@ namespace {
 // only to time them).
 class BufferingSink final : public VertexSink {
 public:
-    explicit BufferingSink(int channels) : channels_(channels) {}
+    explicit BufferingSink(int channels) : channels_(static_cast<std::size_t>(channels)) {}
     bool push(float z, const double* values, std::uint32_t count) override {
-        z_.push_back(z);
-        v_.insert(v_.end(), values, values + channels_);
-        count_.push_back(count);
+        if (size_ == z_.size()) grow();
+        z_[size_] = z;
+        std::copy(values, values + channels_, v_.data() + size_ * channels_);
+        count_[size_] = count;
+        ++size_;
         return true;
     }
-    void clear() {
-        z_.clear();
-        v_.clear();
-        count_.clear();
-    }
+    void clear() { size_ = 0; }
     // Feeds the compressor (the sweep's output is valid input) until it
     // refuses a vertex; returns false then.
     bool replay(Compressor& compressor) const {
-        return compressor.pushValid(z_.data(), v_.data(), count_.data(), z_.size()) == z_.size();
+        return compressor.pushValid(z_.data(), v_.data(), count_.data(), size_) == size_;
     }
 
 private:
-    int channels_;
+    // The arrays are kept at their largest size and written by index.
+    void grow() {
+        const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
+        z_.resize(capacity);
+        v_.resize(capacity * channels_);
+        count_.resize(capacity);
+    }
+
+    std::size_t channels_;
+    std::size_t size_ = 0;
     std::vector<float> z_;
     std::vector<double> v_;
     std::vector<std::uint32_t> count_;

@@ -17,11 +17,24 @@ struct Event {
     float z;
     std::uint32_t input;
 };
-struct Later {
-    bool operator()(const Event& a, const Event& b) const {
-        return a.z > b.z || (a.z == b.z && a.input > b.input);
+bool earlier(const Event& a, const Event& b) { return a.z < b.z || (a.z == b.z && a.input < b.input); }
+
+// Restores the min-heap order (earliest event on top) below position i after
+// heap[i] changed: the next vertex of the input on top replaces it in one
+// sift-down, where a pop and a push would sift twice.
+void siftDown(std::vector<Event>& heap, std::size_t i) {
+    const std::size_t n = heap.size();
+    const Event moving = heap[i];
+    for (;;) {
+        std::size_t child = 2 * i + 1;
+        if (child >= n) break;
+        if (child + 1 < n && earlier(heap[child + 1], heap[child])) ++child;
+        if (!earlier(heap[child], moving)) break;
+        heap[i] = heap[child];
+        i = child;
     }
-};
+    heap[i] = moving;
+}
 
 // The running slope sum carries rounding errors of up to 2^-53 times the
 // magnitudes that went through it since it was last computed exactly. Once
@@ -38,7 +51,7 @@ struct Sweeper::Impl {
     std::vector<std::uint32_t> sloped;
     std::vector<std::uint32_t> slopedAt;
     std::vector<unsigned char> atZero;
-    std::vector<Event> heap;  // a binary heap under Later: the earliest event on top
+    std::vector<Event> heap;  // a binary min-heap under earlier(): the next event on top
 
     // Input is VisibilityFunction or VisibilityView (the same accessors).
     template <class Input>
@@ -115,10 +128,8 @@ std::optional<float> Sweeper::Impl::run(Span<const Input> inputs, Span<const dou
     // their depths and sample counts belong to the output.
     heap.clear();
     for (std::size_t k = 0; k < n; ++k)
-        if (!inputs[k].empty()) {
-            heap.push_back({inputs[k].z(0), static_cast<std::uint32_t>(k)});
-            std::push_heap(heap.begin(), heap.end(), Later{});
-        }
+        if (!inputs[k].empty()) heap.push_back({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+    std::sort(heap.begin(), heap.end(), earlier);  // sorted is a heap
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
@@ -139,8 +150,6 @@ std::optional<float> Sweeper::Impl::run(Span<const Input> inputs, Span<const dou
         std::uint64_t count = 0;
         while (!heap.empty() && heap.front().z == z) {
             const std::size_t k = heap.front().input;
-            std::pop_heap(heap.begin(), heap.end(), Later{});
-            heap.pop_back();
             const Input& f = inputs[k];
             const std::size_t first = next[k];
             std::size_t last = first;
@@ -185,9 +194,12 @@ std::optional<float> Sweeper::Impl::run(Span<const Input> inputs, Span<const dou
             }
             next[k] = last + 1;
             if (more) {
-                heap.push_back({f.z(last + 1), static_cast<std::uint32_t>(k)});
-                std::push_heap(heap.begin(), heap.end(), Later{});
+                heap.front() = {f.z(last + 1), static_cast<std::uint32_t>(k)};
+            } else {
+                heap.front() = heap.back();
+                heap.pop_back();
             }
+            if (!heap.empty()) siftDown(heap, 0);
         }
 
         bool step = false;
