@@ -55,7 +55,16 @@ struct Sweeper::Impl {
 
     // Input is VisibilityFunction or VisibilityView (the same accessors).
     template <class Input>
-    std::optional<float> run(Span<const Input> inputs, Span<const double> weights, int channels, VertexSink& sink);
+    std::optional<float> run(Span<const Input> inputs, Span<const double> weights, int channels, VertexSink& sink) {
+        // The channel count as a constant lets the compiler unroll the
+        // per-channel loops (the arithmetic stays the same).
+        return channels == 1 ? runWith<Input, 1>(inputs, weights, channels, sink)
+                             : runWith<Input, kMaxChannels>(inputs, weights, channels, sink);
+    }
+    // `channels` is NC when valid (checked here, like the rest).
+    template <class Input, std::size_t NC>
+    std::optional<float> runWith(Span<const Input> inputs, Span<const double> weights, int channels,
+                                 VertexSink& sink);
 };
 
 Sweeper::Sweeper() : impl_(std::make_unique<Impl>()) {}
@@ -78,9 +87,9 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
     return Sweeper().sweep(inputs, weights, channels, sink);
 }
 
-template <class Input>
-std::optional<float> Sweeper::Impl::run(Span<const Input> inputs, Span<const double> weights, int channels,
-                                        VertexSink& sink) {
+template <class Input, std::size_t NC>
+std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const double> weights, int channels,
+                                            VertexSink& sink) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
     if (inputs.size() != weights.size())
@@ -106,7 +115,7 @@ std::optional<float> Sweeper::Impl::run(Span<const Input> inputs, Span<const dou
                     detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
 
     const std::size_t n = inputs.size();
-    const std::size_t nc = static_cast<std::size_t>(channels);
+    constexpr std::size_t nc = NC;
     w.resize(n);
     for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
     next.assign(n, 0);
