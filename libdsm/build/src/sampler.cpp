@@ -15,6 +15,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
@@ -387,21 +388,20 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
-    std::vector<std::vector<VisibilityFunction>> rowTiles(tilesX);
-    std::vector<TileStats> rowStats(tilesX);
-    for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
-        arena.execute([&] {
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tilesX, 1), [&](const auto& range) {
-                for (std::uint32_t tx = range.begin(); tx < range.end(); ++tx) {
-                    rowStats[tx] = TileStats{};
-                    computeTile(tx, ty, rowTiles[tx], rowStats[tx]);
-                }
-            });
-        });
+    // Two rows of tiles: the writer takes one (in the arena, as one more task)
+    // while the workers build the next. Tiles reach the writer in the same
+    // order as without the overlap, so the file is the same.
+    std::array<std::vector<std::vector<VisibilityFunction>>, 2> rowTiles;
+    std::array<std::vector<TileStats>, 2> rowStats;
+    for (int k = 0; k < 2; ++k) {
+        rowTiles[k].resize(tilesX);
+        rowStats[k].resize(tilesX);
+    }
+    auto writeRow = [&](std::uint32_t ty) {
         const auto start = Clock::now();
         for (std::uint32_t tx = 0; tx < tilesX; ++tx) {
-            writer.writeTile(tx, ty, rowTiles[tx]);
-            const TileStats& s = rowStats[tx];
+            writer.writeTile(tx, ty, rowTiles[ty % 2][tx]);
+            const TileStats& s = rowStats[ty % 2][tx];
             result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
             result.sweepSeconds += s.timings.sweepSeconds;
             result.compressionSeconds += s.timings.compressionSeconds;
@@ -411,8 +411,34 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             result.maxVerticesPerPixel = std::max(result.maxVerticesPerPixel, s.maxVertices);
         }
         result.writingSeconds += since(start);
-        if (options.progress) options.progress(double(ty + 1) / tilesY);
+    };
+    // Declared after all the writing task uses, and waited for before any
+    // error leaves: the task never outlives them.
+    tbb::task_group writing;
+    auto finishWriting = [&] { arena.execute([&] { writing.wait(); }); };
+    try {
+        for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
+            arena.execute([&] {
+                tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tilesX, 1), [&](const auto& range) {
+                    for (std::uint32_t tx = range.begin(); tx < range.end(); ++tx) {
+                        rowStats[ty % 2][tx] = TileStats{};
+                        computeTile(tx, ty, rowTiles[ty % 2][tx], rowStats[ty % 2][tx]);
+                    }
+                });
+            });
+            finishWriting();  // the previous row: its buffers are the next row's
+            if (ty > 0 && options.progress) options.progress(double(ty) / tilesY);
+            arena.execute([&] { writing.run([&writeRow, ty] { writeRow(ty); }); });
+        }
+        finishWriting();
+    } catch (...) {
+        try {
+            finishWriting();
+        } catch (...) {  // the first error is the one to report
+        }
+        throw;
     }
+    if (options.progress) options.progress(1.0);
     const auto start = Clock::now();
     writer.finish();
     result.writingSeconds += since(start);
