@@ -126,7 +126,8 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
                                     4 * (4 + 4 * std::uint64_t(channels));
     const std::uint64_t samples =
         std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
-    e.memoryBytes = directory + 2 * row + samples;
+    // Two rows of tiles (one written while the next is built) and the pending mip tiles.
+    e.memoryBytes = directory + 3 * row + samples;
     return e;
 }
 
