@@ -5,13 +5,31 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <limits>
+#include <new>
 #include <random>
 #include <string>
 #include <vector>
 
 #include "oracle.h"
+
+// Heap allocations of the whole program, counted for the PixelBuilder tests
+// that check what a pixel allocates.
+namespace {
+std::atomic<std::uint64_t> allocationCount{0};
+}  // namespace
+
+void* operator new(std::size_t size) {
+    ++allocationCount;
+    if (void* p = std::malloc(size == 0 ? 1 : size)) return p;
+    throw std::bad_alloc();
+}
+// Not inlined: GCC would take free() of what `new` returned for a mismatch.
+__attribute__((noinline)) void operator delete(void* p) noexcept { std::free(p); }
+__attribute__((noinline)) void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace {
 
@@ -295,6 +313,88 @@ TEST(BuildVisibility, ErrorsNameTheRay) {
         const double two[] = {1.0, 1.0};
         EXPECT_NE(buildError(rays, two), "no error");
     }
+}
+
+std::vector<VisibilityFunction> transmittancesOf(std::span<const SampleRay> rays, const CompressorOptions& o) {
+    std::vector<VisibilityFunction> out;
+    for (const SampleRay& r : rays) out.push_back(dsm::transmittance(r, o.channels, o.keepCounts));
+    return out;
+}
+
+TEST(PixelBuilder, ReusedBuilderMatchesBuildVisibility) {
+    // One builder per set of options, over random pixels of every size, from
+    // the rays or from their transmittances built beforehand, gives exactly
+    // what buildVisibility() gives each pixel alone, layers included.
+    std::mt19937_64 rng(77);
+    const SurfaceHit planes[] = {hit(1.0f, 1.0f), hit(2.0f, 0.5f), hit(3.0f, 1.0f)};
+    for (int channels : {1, 3})
+        for (int layers : {1, 3}) {
+            const CompressorOptions o = options(0.02, channels, layers, layers > 1);
+            dsm::PixelBuilder builder(o);
+            for (int trial = 0; trial < 12; ++trial) {
+                Pixel p = randomPixel(rng, 1 + rng() % 120, channels, trial % 2 == 0);
+                if (trial % 3 == 0) {  // opaque planes in front: layers end and restart
+                    for (std::size_t k = 0; k < p.rays.size(); k += 2) p.rays[k] = {planes, p.volumes[k]};
+                }
+                const VisibilityFunction expected = dsm::buildVisibility(p.rays, p.weights, o);
+                EXPECT_EQ(builder.build(p.rays, p.weights), expected) << "trial " << trial;
+                const std::vector<VisibilityFunction> taus = transmittancesOf(p.rays, o);
+                const std::vector<dsm::VisibilityView> views(taus.begin(), taus.end());
+                EXPECT_EQ(builder.build(views, p.rays, p.weights), expected) << "trial " << trial;
+                if (HasFailure()) return;
+            }
+        }
+}
+
+TEST(PixelBuilder, AnErrorLeavesTheBuilderUsable) {
+    // The second layer's rays are rebuilt from the rays: a bad ray stops the
+    // pixel there, after the compressor has taken the first layer. The next
+    // pixel must not inherit it.
+    const CompressorOptions o = options(0.01, 1, 2);
+    const SurfaceHit good[] = {hit(1.0f, 1.0f), hit(2.0f, 0.5f)};
+    const SurfaceHit bad[] = {hit(1.0f, 1.0f), hit(std::numeric_limits<float>::quiet_NaN(), 0.5f)};
+    const SampleRay goodRays[] = {{good, {}}, {good, {}}};
+    const SampleRay badRays[] = {{good, {}}, {bad, {}}};
+    const double w[] = {1.0, 1.0};
+    const std::vector<VisibilityFunction> taus = transmittancesOf(goodRays, o);
+    const std::vector<dsm::VisibilityView> views(taus.begin(), taus.end());
+    dsm::PixelBuilder builder(o);
+    try {
+        builder.build(views, badRays, w);
+        ADD_FAILURE() << "no error";
+    } catch (const dsm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("ray 1"));
+        EXPECT_THAT(e.what(), HasSubstr("surface hit 1"));
+    }
+    const VisibilityFunction expected = dsm::buildVisibility(goodRays, w, o);
+    EXPECT_EQ(expected.layerCount(), 2u);
+    EXPECT_EQ(builder.build(views, goodRays, w), expected);
+    EXPECT_THROW(builder.build(views, std::span<const SampleRay>(goodRays, 1), w), dsm::Error);
+}
+
+TEST(PixelBuilder, AllocatesOnlyItsResultOnceWarm) {
+    // After a first pixel, a pixel allocates only what its result holds:
+    // as much with 400 rays as with 4 (same result), where buildVisibility()
+    // allocates for every ray. The second layer (rebuilt transmittances) is
+    // included: an opaque hit ends the first.
+    const SurfaceHit hits[] = {hit(1.0f, 0.3f), hit(2.0f, 1.0f), hit(3.0f, 0.25f)};
+    const VolumeSample volume[] = {{0.5f, 0.2f}, {1.5f, 0.4f}, {2.5f, 0.1f}};
+    const std::vector<SampleRay> many(400, SampleRay{hits, volume}), few(4, SampleRay{hits, volume});
+    const std::vector<double> manyWeights(400, 1.0), fewWeights(4, 1.0);
+    const CompressorOptions o = options(0.01, 1, 2);
+    dsm::PixelBuilder builder(o);
+    const VisibilityFunction warm = builder.build(many, manyWeights);
+    ASSERT_EQ(warm.layerCount(), 2u);
+    auto allocations = [](auto&& build) {
+        const std::uint64_t before = allocationCount;
+        const VisibilityFunction f = build();
+        return allocationCount - before;
+    };
+    const std::uint64_t fewRays = allocations([&] { return builder.build(few, fewWeights); });
+    const std::uint64_t manyRays = allocations([&] { return builder.build(many, manyWeights); });
+    EXPECT_EQ(manyRays, fewRays);
+    EXPECT_LT(manyRays, 20u);
+    EXPECT_GT(allocations([&] { return dsm::buildVisibility(many, manyWeights, o); }), 400u);
 }
 
 }  // namespace

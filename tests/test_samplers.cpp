@@ -93,6 +93,32 @@ TEST(Samplers, ARegionOfTheScanlineSamplerEqualsTheFullBuild) {
                 << "pixel " << x << "," << y;
 }
 
+// A row of tiles is written while the next is built: an error in a later
+// row must wait for that writing, then leave no file behind (not even a
+// temporary one), and the progress must stop at the rows written.
+TEST(Samplers, AnErrorWhileARowIsWrittenLeavesNoFile) {
+    const TempDir dir;
+    const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");
+    for (unsigned threads : {1u, 2u}) {
+        dsm::BuildOptions options = smallBuild();
+        options.threads = threads;
+        options.sampleRays = [](std::uint32_t, std::uint32_t y, std::span<const dsm::SampleRay>) {
+            if (y == 35) throw dsm::Error(dsm::ErrorCode::scene, "pixel row 35 refused");
+        };
+        double progress = 0.0;
+        options.progress = [&](double done) { progress = done; };
+        const std::string path = (dir / "refused.dsm").string();
+        try {
+            dsm::buildMap(scene, options, path);
+            ADD_FAILURE() << "no error";
+        } catch (const dsm::Error& e) {
+            EXPECT_NE(std::string(e.what()).find("pixel row 35 refused"), std::string::npos) << e.what();
+        }
+        EXPECT_LE(progress, 2.0 / 3.0);  // rows of 16, 16 and 8 pixels: the third never completes
+        EXPECT_TRUE(std::filesystem::is_empty(dir.path())) << "threads " << threads;
+    }
+}
+
 // Each primitive is filed in the tiles its projected bounds reach and no
 // others: a small ball in one tile's interior is in that tile's bucket only,
 // and a ground plane covering the view in every tile's.

@@ -359,3 +359,33 @@ TEST(Transmittance, ErrorsNameVolumeSampleIndexAndValue) {
 }
 
 }  // namespace
+
+TEST(Transmittance, ReusedBuilderMatchesFreshBuilds) {
+    // One builder and one output, reused over rays of every kind (channels,
+    // counts, starts, unsorted and tied depths, errors in between), give what
+    // transmittance() gives each ray alone.
+    std::mt19937_64 rng(22);
+    std::uniform_real_distribution<float> depth(0.0f, 10.0f), unit(0.0f, 1.0f);
+    dsm::TransmittanceBuilder builder;
+    VisibilityFunction out;
+    for (int trial = 0; trial < 120; ++trial) {
+        const int channels = trial % 3 == 0 ? 3 : 1;
+        const bool counts = trial % 4 != 1;
+        std::vector<SurfaceHit> hits(rng() % 40);
+        for (SurfaceHit& h : hits) {
+            h.z = trial % 2 ? std::round(depth(rng)) : depth(rng);
+            for (float& o : h.opacity) o = unit(rng) < 0.2f ? 0.0f : unit(rng);
+        }
+        std::vector<VolumeSample> volume(rng() % 3 == 0 ? 0 : rng() % 10);
+        for (VolumeSample& s : volume) s = {trial % 5 == 0 ? std::round(depth(rng)) : depth(rng), 0.5f * unit(rng)};
+        const float zStart = trial % 3 == 2 ? depth(rng) : -kInf;
+        const SampleRay ray{hits, volume};
+        builder.build(ray, channels, counts, zStart, out);
+        EXPECT_EQ(out, dsm::transmittance(ray, channels, counts, zStart)) << "trial " << trial;
+        if (trial % 10 == 0) {
+            const SurfaceHit bad[] = {hit(1.0f, 0.5f), hit(kNaN, 0.5f)};
+            EXPECT_THROW(builder.build(SampleRay{bad, {}}, channels, counts, -kInf, out), dsm::Error);
+        }
+        if (HasFailure()) return;
+    }
+}

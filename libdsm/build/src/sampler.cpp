@@ -5,14 +5,17 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <limits>
 #include <mutex>
 #include <optional>
 #include <vector>
 
 #include <nlohmann/json.hpp>
 #include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
@@ -61,6 +64,31 @@ struct SampleData {
     double time = 0.0;        // in the shutter, [0, 1)
 };
 
+// Working memory of one worker thread, kept from tile to tile: once it has
+// grown to the largest tile, a tile allocates nothing per sample or per pixel
+// but its pixels' results. Vectors of vectors are only ever grown, so that
+// each inner vector keeps its storage.
+struct TileWorkspace {
+    explicit TileWorkspace(const CompressorOptions& compression) : pixel(compression) {}
+
+    std::vector<SampleData> samples;  // of the tile's sample pixels, spp each
+    std::vector<std::uint32_t> timeSlot, cell;
+    std::vector<HiderSample> points;
+    std::vector<std::vector<RaySurfaceHit>> hits;
+    std::vector<RaySurfaceHit> rayHits;
+    std::vector<RayVolumeSample> volume;
+    // Per sample: its transmittance, built when a pixel first uses it and
+    // then shared by every pixel whose filter reaches the sample.
+    std::vector<VisibilityFunction> transmittances;
+    std::vector<unsigned char> built;
+    // One pixel's inputs.
+    std::vector<SampleRay> rays;
+    std::vector<VisibilityView> views;
+    std::vector<double> weights;
+    TransmittanceBuilder transmittance;
+    PixelBuilder pixel;
+};
+
 struct TileStats {
     PixelTimings timings;
     double castSeconds = 0.0;
@@ -93,9 +121,13 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     const std::uint64_t row = std::uint64_t(e.width) * tile * perPixel;
     const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * options.filterWidth - 0.5)));
     const std::uint64_t samplePixels = (tile + 2 * reach) * (tile + 2 * reach);
-    const std::uint64_t samples = std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels *
-                                  options.samplesPerPixel * (sizeof(SampleData) + 2 * sizeof(SurfaceHit));
-    e.memoryBytes = directory + 2 * row + samples;
+    // Per sample: its data, two hits, and their transmittance (four vertices).
+    const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(VisibilityFunction) +
+                                    4 * (4 + 4 * std::uint64_t(channels));
+    const std::uint64_t samples =
+        std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
+    // Two rows of tiles (one written while the next is built) and the pending mip tiles.
+    e.memoryBytes = directory + 3 * row + samples;
     return e;
 }
 
@@ -196,22 +228,26 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     std::optional<ScanlineHider> hider;
     if (scanline) hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach));
 
-    // The samples of one sample pixel: positions and times, from the pixel's
-    // own seed (so a pixel's samples do not depend on the tile or region).
-    auto placeSamples = [&](std::uint32_t px, std::uint32_t py, std::vector<SampleData>& out) {
+    tbb::enumerable_thread_specific<TileWorkspace> workspaces([&] { return TileWorkspace(compression); });
+
+    // The spp samples of one sample pixel into out[0, spp): positions and
+    // times, from the pixel's own seed (so a pixel's samples do not depend on
+    // the tile or region).
+    auto placeSamples = [&](std::uint32_t px, std::uint32_t py, SampleData* out, TileWorkspace& ws) {
         detail::SplitMix64 rng(detail::pixelSeed(options.seed, px, py));
-        std::vector<std::uint32_t> timeSlot(spp);
+        std::vector<std::uint32_t>& timeSlot = ws.timeSlot;
+        timeSlot.resize(spp);
         for (std::uint32_t k = 0; k < spp; ++k) timeSlot[k] = k;
         for (std::uint32_t k = spp; k > 1; --k) std::swap(timeSlot[k - 1], timeSlot[rng.next() % k]);
         // Strata: cell k of the gridX x gridY grid. When the grid has more
         // cells than samples, spp of them are chosen at random per pixel, so
         // that no part of the pixel is left out every time (unbiased).
-        std::vector<std::uint32_t> cell(gridX * gridY);
+        std::vector<std::uint32_t>& cell = ws.cell;
+        cell.resize(gridX * gridY);
         for (std::uint32_t k = 0; k < cell.size(); ++k) cell[k] = k;
         if (cell.size() > spp)
             for (std::uint32_t k = 0; k < spp; ++k)
                 std::swap(cell[k], cell[k + rng.next() % (cell.size() - k)]);
-        out.resize(spp);
         for (std::uint32_t k = 0; k < spp; ++k) {
             SampleData& s = out[k];
             s.hits.clear();
@@ -236,51 +272,46 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     };
 
     // The samples of the sample pixels [x0, x1) x [y0, y1) of tile (tx, ty),
-    // placed and given what they cross; samples[(y - y0) * (x1 - x0) + (x - x0)]
-    // holds pixel (x, y)'s.
+    // placed and given what they cross: ws.samples[((y - y0) * (x1 - x0) +
+    // (x - x0)) * spp + k] is pixel (x, y)'s k-th. Returns how many.
     auto sampleTile = [&](std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels,
-                          std::vector<std::vector<SampleData>>& samples, TileStats& stats) {
+                          TileWorkspace& ws, TileStats& stats) {
         const auto start = Clock::now();
         const std::uint32_t sw = pixels[2] - pixels[0];
-        samples.resize(std::size_t(sw) * (pixels[3] - pixels[1]));
+        const std::size_t count = std::size_t(sw) * (pixels[3] - pixels[1]) * spp;
+        if (ws.samples.size() < count) ws.samples.resize(count);
+        const std::span<SampleData> samples(ws.samples.data(), count);
         for (std::uint32_t y = pixels[1]; y < pixels[3]; ++y)
             for (std::uint32_t x = pixels[0]; x < pixels[2]; ++x)
-                placeSamples(x, y, samples[std::size_t(y - pixels[1]) * sw + (x - pixels[0])]);
-        std::vector<RaySurfaceHit> rayHits;
-        std::vector<RayVolumeSample> volume;
+                placeSamples(x, y, &samples[(std::size_t(y - pixels[1]) * sw + (x - pixels[0])) * spp], ws);
         if (hider) {
-            std::vector<HiderSample> points;
-            points.reserve(samples.size() * spp);
-            for (const auto& pixel : samples)
-                for (const SampleData& s : pixel) {
-                    HiderSample& h = points.emplace_back();
-                    h.x = s.x;
-                    h.y = s.y;
-                    h.time = s.time;
-                    frame.ray(s.x, s.y, h.origin, h.direction);
-                }
-            std::vector<std::vector<RaySurfaceHit>> hits;
-            hider->tileHits(tx, ty, pixels, spp, points, camera.nearPlane, hits);
-            std::size_t i = 0;
-            for (auto& pixel : samples)
-                for (SampleData& s : pixel) {
-                    addSurfaceHits(hits[i], s);
-                    addVolumeSamples(points[i].origin, points[i].direction, s, volume);
-                    ++i;
-                }
+            ws.points.resize(count);
+            for (std::size_t i = 0; i < count; ++i) {
+                const SampleData& s = samples[i];
+                HiderSample& h = ws.points[i];
+                h.x = s.x;
+                h.y = s.y;
+                h.time = s.time;
+                frame.ray(s.x, s.y, h.origin, h.direction);
+            }
+            hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, ws.hits);
+            for (std::size_t i = 0; i < count; ++i) {
+                addSurfaceHits(ws.hits[i], samples[i]);
+                addVolumeSamples(ws.points[i].origin, ws.points[i].direction, samples[i], ws.volume);
+            }
         } else {
-            for (auto& pixel : samples)
-                for (SampleData& s : pixel) {
-                    Vec3 o, d;
-                    frame.ray(s.x, s.y, o, d);
-                    rayHits.clear();
-                    caster.surfaceHits(o, d, s.time, camera.nearPlane, rayHits);
-                    addSurfaceHits(rayHits, s);
-                    addVolumeSamples(o, d, s, volume);
-                }
+            for (SampleData& s : samples) {
+                Vec3 o, d;
+                frame.ray(s.x, s.y, o, d);
+                ws.rayHits.clear();
+                caster.surfaceHits(o, d, s.time, camera.nearPlane, ws.rayHits);
+                addSurfaceHits(ws.rayHits, s);
+                addVolumeSamples(o, d, s, ws.volume);
+            }
         }
-        stats.samples += samples.size() * spp;
+        stats.samples += count;
         stats.castSeconds += since(start);
+        return count;
     };
 
     auto computeTile = [&](std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>& pixels,
@@ -296,39 +327,57 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
         const std::uint32_t sx0 = rx0 >= std::uint32_t(reach) ? rx0 - reach : 0, sx1 = std::min(rx1 + reach, W);
         const std::uint32_t sy0 = ry0 >= std::uint32_t(reach) ? ry0 - reach : 0, sy1 = std::min(ry1 + reach, H);
         const std::uint32_t sw = sx1 - sx0;
-        std::vector<std::vector<SampleData>> samples;
-        sampleTile(tx, ty, {sx0, sy0, sx1, sy1}, samples, stats);
+        TileWorkspace& ws = workspaces.local();
+        const std::size_t sampleCount = sampleTile(tx, ty, {sx0, sy0, sx1, sy1}, ws, stats);
+        const std::span<const SampleData> samples(ws.samples.data(), sampleCount);
         for (std::uint32_t y = ry0; y < ry1; ++y)
             for (std::uint32_t x = rx0; x < rx1; ++x) {
-                const auto& s = samples[std::size_t(y - sy0) * sw + (x - sx0)];
+                const auto s = samples.subspan((std::size_t(y - sy0) * sw + (x - sx0)) * spp, spp);
                 for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
                 if (options.sampleRays) {
-                    std::vector<SampleRay> own;
-                    own.reserve(s.size());
-                    for (const SampleData& d : s) own.push_back({d.hits, d.volume});
-                    options.sampleRays(x, y, own);
+                    ws.rays.clear();
+                    for (const SampleData& d : s) ws.rays.push_back({d.hits, d.volume});
+                    options.sampleRays(x, y, ws.rays);
                 }
             }
-        std::vector<SampleRay> rays;
-        std::vector<double> weights;
+        if (ws.transmittances.size() < sampleCount) ws.transmittances.resize(sampleCount);
+        ws.built.assign(sampleCount, 0);
+        constexpr float kFromTheStart = -std::numeric_limits<float>::infinity();
         for (std::uint32_t y = ry0; y < ry1; ++y)
             for (std::uint32_t x = rx0; x < rx1; ++x) {
-                rays.clear();
-                weights.clear();
+                const auto start = Clock::now();
+                ws.rays.clear();
+                ws.views.clear();
+                ws.weights.clear();
                 const double cx = x + 0.5, cy = y + 0.5;
                 for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
                     for (std::uint32_t nx = (x >= std::uint32_t(reach) ? x - reach : 0); nx < std::min(x + reach + 1, W);
-                         ++nx)
-                        for (const SampleData& s : samples[std::size_t(ny - sy0) * sw + (nx - sx0)]) {
+                         ++nx) {
+                        const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
+                        for (std::size_t i = first; i < first + spp; ++i) {
+                            const SampleData& s = samples[i];
                             const double wgt = filterWeight(options.filter, radius, s.x - cx, s.y - cy);
                             if (wgt <= 0.0) continue;
-                            rays.push_back({s.hits, s.volume});
-                            weights.push_back(wgt);
+                            const SampleRay ray{s.hits, s.volume};
+                            if (!ws.built[i]) {
+                                try {
+                                    ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.transmittances[i]);
+                                } catch (const Error& e) {
+                                    throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ",
+                                                                 ws.rays.size(), ": ", e.what()));
+                                }
+                                ws.built[i] = 1;
+                            }
+                            ws.rays.push_back(ray);
+                            ws.views.push_back(ws.transmittances[i].view());
+                            ws.weights.push_back(wgt);
                         }
+                    }
+                stats.timings.transmittanceSeconds += since(start);
                 VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
-                if (rays.empty()) continue;  // a filter too narrow to catch a sample
+                if (ws.rays.empty()) continue;  // a filter too narrow to catch a sample
                 try {
-                    f = buildVisibility(rays, weights, compression, &stats.timings);
+                    f = ws.pixel.build(ws.views, ws.rays, ws.weights, &stats.timings);
                 } catch (const Error& e) {
                     throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                 }
@@ -341,21 +390,20 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
-    std::vector<std::vector<VisibilityFunction>> rowTiles(tilesX);
-    std::vector<TileStats> rowStats(tilesX);
-    for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
-        arena.execute([&] {
-            tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tilesX, 1), [&](const auto& range) {
-                for (std::uint32_t tx = range.begin(); tx < range.end(); ++tx) {
-                    rowStats[tx] = TileStats{};
-                    computeTile(tx, ty, rowTiles[tx], rowStats[tx]);
-                }
-            });
-        });
+    // Two rows of tiles: the writer takes one (in the arena, as one more task)
+    // while the workers build the next. Tiles reach the writer in the same
+    // order as without the overlap, so the file is the same.
+    std::array<std::vector<std::vector<VisibilityFunction>>, 2> rowTiles;
+    std::array<std::vector<TileStats>, 2> rowStats;
+    for (int k = 0; k < 2; ++k) {
+        rowTiles[k].resize(tilesX);
+        rowStats[k].resize(tilesX);
+    }
+    auto writeRow = [&](std::uint32_t ty) {
         const auto start = Clock::now();
         for (std::uint32_t tx = 0; tx < tilesX; ++tx) {
-            writer.writeTile(tx, ty, rowTiles[tx]);
-            const TileStats& s = rowStats[tx];
+            writer.writeTile(tx, ty, rowTiles[ty % 2][tx]);
+            const TileStats& s = rowStats[ty % 2][tx];
             result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
             result.sweepSeconds += s.timings.sweepSeconds;
             result.compressionSeconds += s.timings.compressionSeconds;
@@ -365,8 +413,34 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             result.maxVerticesPerPixel = std::max(result.maxVerticesPerPixel, s.maxVertices);
         }
         result.writingSeconds += since(start);
-        if (options.progress) options.progress(double(ty + 1) / tilesY);
+    };
+    // Declared after all the writing task uses, and waited for before any
+    // error leaves: the task never outlives them.
+    tbb::task_group writing;
+    auto finishWriting = [&] { arena.execute([&] { writing.wait(); }); };
+    try {
+        for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
+            arena.execute([&] {
+                tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tilesX, 1), [&](const auto& range) {
+                    for (std::uint32_t tx = range.begin(); tx < range.end(); ++tx) {
+                        rowStats[ty % 2][tx] = TileStats{};
+                        computeTile(tx, ty, rowTiles[ty % 2][tx], rowStats[ty % 2][tx]);
+                    }
+                });
+            });
+            finishWriting();  // the previous row: its buffers are the next row's
+            if (ty > 0 && options.progress) options.progress(double(ty) / tilesY);
+            arena.execute([&] { writing.run([&writeRow, ty] { writeRow(ty); }); });
+        }
+        finishWriting();
+    } catch (...) {
+        try {
+            finishWriting();
+        } catch (...) {  // the first error is the one to report
+        }
+        throw;
     }
+    if (options.progress) options.progress(1.0);
     const auto start = Clock::now();
     writer.finish();
     result.writingSeconds += since(start);

@@ -99,8 +99,8 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
 void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels,
                              std::uint32_t spp, std::span<const HiderSample> samples, double tMin,
                              std::vector<std::vector<RaySurfaceHit>>& hits) const {
-    hits.resize(samples.size());
-    for (auto& h : hits) h.clear();
+    if (hits.size() < samples.size()) hits.resize(samples.size());
+    for (std::size_t i = 0; i < samples.size(); ++i) hits[i].clear();
     if (tx >= tilesX_ || ty >= tilesY_) return;
     const std::size_t tile = std::size_t(ty) * tilesX_ + tx;
     const std::uint32_t sw = pixels[2] - pixels[0];

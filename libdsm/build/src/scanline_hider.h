@@ -40,7 +40,9 @@ public:
     /// samples cover the sample pixels [x0, x1) x [y0, y1) (`pixels`), spp per
     /// pixel: pixel (x, y)'s k-th sample is samples[((y - y0) * (x1 - x0) +
     /// (x - x0)) * spp + k]. hits[i] is cleared, then receives samples[i]'s
-    /// crossings in the order of the primitives.
+    /// crossings in the order of the primitives. `hits` is grown to at least
+    /// samples.size() but never shrunk, so that a caller reusing it from tile
+    /// to tile keeps each entry's storage.
     void tileHits(std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels, std::uint32_t spp,
                   std::span<const HiderSample> samples, double tMin,
                   std::vector<std::vector<RaySurfaceHit>>& hits) const;

@@ -1,5 +1,6 @@
 #include "dsm/build_visibility.h"
 
+#include <algorithm>
 #include <chrono>
 #include <limits>
 #include <vector>
@@ -17,26 +18,33 @@ namespace {
 // only to time them).
 class BufferingSink final : public VertexSink {
 public:
-    explicit BufferingSink(int channels) : channels_(channels) {}
+    explicit BufferingSink(int channels) : channels_(static_cast<std::size_t>(channels)) {}
     bool push(float z, const double* values, std::uint32_t count) override {
-        z_.push_back(z);
-        v_.insert(v_.end(), values, values + channels_);
-        count_.push_back(count);
+        if (size_ == z_.size()) grow();
+        z_[size_] = z;
+        std::copy(values, values + channels_, v_.data() + size_ * channels_);
+        count_[size_] = count;
+        ++size_;
         return true;
     }
-    void clear() {
-        z_.clear();
-        v_.clear();
-        count_.clear();
-    }
+    void clear() { size_ = 0; }
     // Feeds the compressor (the sweep's output is valid input) until it
     // refuses a vertex; returns false then.
     bool replay(Compressor& compressor) const {
-        return compressor.pushValid(z_.data(), v_.data(), count_.data(), z_.size()) == z_.size();
+        return compressor.pushValid(z_.data(), v_.data(), count_.data(), size_) == size_;
     }
 
 private:
-    int channels_;
+    // The arrays are kept at their largest size and written by index.
+    void grow() {
+        const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
+        z_.resize(capacity);
+        v_.resize(capacity * channels_);
+        count_.resize(capacity);
+    }
+
+    std::size_t channels_;
+    std::size_t size_ = 0;
     std::vector<float> z_;
     std::vector<double> v_;
     std::vector<std::uint32_t> count_;
@@ -47,44 +55,88 @@ double since(Clock::time_point start) { return std::chrono::duration<double>(Clo
 
 }  // namespace
 
-VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
-                                   const CompressorOptions& options, PixelTimings* timings) {
-    Compressor compressor(options);
-    std::vector<VisibilityFunction> taus;
-    taus.reserve(rays.size());
-    BufferingSink swept(options.channels);
-    float zStart = -std::numeric_limits<float>::infinity();
-    for (;;) {
-        auto start = Clock::now();
-        taus.clear();
+struct PixelBuilder::Impl {
+    explicit Impl(const CompressorOptions& o) : options(o), compressor(o), swept(o.channels) {}
+
+    // taus[k] = the transmittance of rays[k] beyond zStart, views[k] a view of it.
+    void buildTransmittances(Span<const SampleRay> rays, float zStart, PixelTimings* timings) {
+        const auto start = Clock::now();
+        if (taus.size() < rays.size()) taus.resize(rays.size());  // never shrunk: each keeps its storage
+        views.clear();
         for (std::size_t k = 0; k < rays.size(); ++k) {
             try {
-                taus.push_back(transmittance(rays[k], options.channels, options.keepCounts, zStart));
+                transmittances.build(rays[k], options.channels, options.keepCounts, zStart, taus[k]);
             } catch (const Error& e) {
                 throw Error(e.code(), detail::concat("ray ", k, ": ", e.what()));
             }
-            if (timings) timings->transmittanceVertices += taus.back().size();
+            views.push_back(taus[k].view());
         }
-        if (timings) {
-            timings->transmittanceSeconds += since(start);
-            start = Clock::now();
-        }
-        swept.clear();
-        sweep(taus, weights, options.channels, swept);
-        if (timings) {
-            timings->sweepSeconds += since(start);
-            start = Clock::now();
-        }
-        const bool complete = swept.replay(compressor);
-        if (timings) timings->compressionSeconds += since(start);
-        if (complete) break;
-        // The compressor ended a layer: everything up to its depth is in it.
-        zStart = compressor.layerEndDepth();
+        if (timings) timings->transmittanceSeconds += since(start);
     }
-    const auto start = Clock::now();
-    VisibilityFunction result = compressor.finish();
-    if (timings) timings->compressionSeconds += since(start);
-    return result;
+
+    VisibilityFunction run(Span<const VisibilityView> first, Span<const SampleRay> rays, Span<const double> weights,
+                           PixelTimings* timings) {
+        // An error may have left the compressor inside a function: drop that.
+        if (compressorInUse) compressor.finish();
+        compressorInUse = true;
+        Span<const VisibilityView> inputs = first;
+        for (;;) {
+            if (timings)
+                for (const VisibilityView& tau : inputs) timings->transmittanceVertices += tau.size();
+            auto start = Clock::now();
+            swept.clear();
+            sweeper.sweep(inputs, weights, options.channels, swept);
+            if (timings) {
+                timings->sweepSeconds += since(start);
+                start = Clock::now();
+            }
+            const bool complete = swept.replay(compressor);
+            if (timings) timings->compressionSeconds += since(start);
+            if (complete) break;
+            // The compressor ended a layer: everything up to its depth is in
+            // it; the next layer sees what lies beyond.
+            buildTransmittances(rays, compressor.layerEndDepth(), timings);
+            inputs = views;
+        }
+        const auto start = Clock::now();
+        VisibilityFunction result = compressor.finish();
+        compressorInUse = false;
+        if (timings) timings->compressionSeconds += since(start);
+        return result;
+    }
+
+    CompressorOptions options;
+    Compressor compressor;
+    bool compressorInUse = false;
+    TransmittanceBuilder transmittances;
+    Sweeper sweeper;
+    BufferingSink swept;
+    std::vector<VisibilityFunction> taus;
+    std::vector<VisibilityView> views;
+};
+
+PixelBuilder::PixelBuilder(const CompressorOptions& options) : impl_(std::make_unique<Impl>(options)) {}
+PixelBuilder::~PixelBuilder() = default;
+PixelBuilder::PixelBuilder(PixelBuilder&&) noexcept = default;
+PixelBuilder& PixelBuilder::operator=(PixelBuilder&&) noexcept = default;
+
+VisibilityFunction PixelBuilder::build(Span<const SampleRay> rays, Span<const double> weights,
+                                       PixelTimings* timings) {
+    impl_->buildTransmittances(rays, -std::numeric_limits<float>::infinity(), timings);
+    return impl_->run(impl_->views, rays, weights, timings);
+}
+
+VisibilityFunction PixelBuilder::build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
+                                       Span<const double> weights, PixelTimings* timings) {
+    if (transmittances.size() != rays.size())
+        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",
+                                                        rays.size(), " rays"));
+    return impl_->run(transmittances, rays, weights, timings);
+}
+
+VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
+                                   const CompressorOptions& options, PixelTimings* timings) {
+    return PixelBuilder(options).build(rays, weights, timings);
 }
 
 DSM_NAMESPACE_END

@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <queue>
 #include <vector>
 
 #include "dsm/error.h"
@@ -18,11 +17,24 @@ struct Event {
     float z;
     std::uint32_t input;
 };
-struct Later {
-    bool operator()(const Event& a, const Event& b) const {
-        return a.z > b.z || (a.z == b.z && a.input > b.input);
+bool earlier(const Event& a, const Event& b) { return a.z < b.z || (a.z == b.z && a.input < b.input); }
+
+// Restores the min-heap order (earliest event on top) below position i after
+// heap[i] changed: the next vertex of the input on top replaces it in one
+// sift-down, where a pop and a push would sift twice.
+void siftDown(std::vector<Event>& heap, std::size_t i) {
+    const std::size_t n = heap.size();
+    const Event moving = heap[i];
+    for (;;) {
+        std::size_t child = 2 * i + 1;
+        if (child >= n) break;
+        if (child + 1 < n && earlier(heap[child + 1], heap[child])) ++child;
+        if (!earlier(heap[child], moving)) break;
+        heap[i] = heap[child];
+        i = child;
     }
-};
+    heap[i] = moving;
+}
 
 // The running slope sum carries rounding errors of up to 2^-53 times the
 // magnitudes that went through it since it was last computed exactly. Once
@@ -32,8 +44,52 @@ constexpr double kCancellationLimit = 1e6;
 
 }  // namespace
 
-std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
-                           int channels, VertexSink& sink) {
+struct Sweeper::Impl {
+    std::vector<double> w;
+    std::vector<std::size_t> next;
+    std::vector<double> slope;
+    std::vector<std::uint32_t> sloped;
+    std::vector<std::uint32_t> slopedAt;
+    std::vector<unsigned char> atZero;
+    std::vector<Event> heap;  // a binary min-heap under earlier(): the next event on top
+
+    // Input is VisibilityFunction or VisibilityView (the same accessors).
+    template <class Input>
+    std::optional<float> run(Span<const Input> inputs, Span<const double> weights, int channels, VertexSink& sink) {
+        // The channel count as a constant lets the compiler unroll the
+        // per-channel loops (the arithmetic stays the same).
+        return channels == 1 ? runWith<Input, 1>(inputs, weights, channels, sink)
+                             : runWith<Input, kMaxChannels>(inputs, weights, channels, sink);
+    }
+    // `channels` is NC when valid (checked here, like the rest).
+    template <class Input, std::size_t NC>
+    std::optional<float> runWith(Span<const Input> inputs, Span<const double> weights, int channels,
+                                 VertexSink& sink);
+};
+
+Sweeper::Sweeper() : impl_(std::make_unique<Impl>()) {}
+Sweeper::~Sweeper() = default;
+Sweeper::Sweeper(Sweeper&&) noexcept = default;
+Sweeper& Sweeper::operator=(Sweeper&&) noexcept = default;
+
+std::optional<float> Sweeper::sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
+                                    VertexSink& sink) {
+    return impl_->run(inputs, weights, channels, sink);
+}
+
+std::optional<float> Sweeper::sweep(Span<const VisibilityView> inputs, Span<const double> weights, int channels,
+                                    VertexSink& sink) {
+    return impl_->run(inputs, weights, channels, sink);
+}
+
+std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
+                           VertexSink& sink) {
+    return Sweeper().sweep(inputs, weights, channels, sink);
+}
+
+template <class Input, std::size_t NC>
+std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const double> weights, int channels,
+                                            VertexSink& sink) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
     if (inputs.size() != weights.size())
@@ -59,29 +115,30 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
                     detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
 
     const std::size_t n = inputs.size();
-    const std::size_t nc = static_cast<std::size_t>(channels);
-    std::vector<double> w(n);
+    constexpr std::size_t nc = NC;
+    w.resize(n);
     for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
-    std::vector<std::size_t> next(n, 0);
-    std::vector<double> slope(n * nc, 0.0);  // current slope of each input, per channel
+    next.assign(n, 0);
+    slope.assign(n * nc, 0.0);  // current slope of each input, per channel
     // Inputs whose current segment slopes (in any channel of positive weight):
     // an exact recomputation of the slope sum only needs these, and when there
     // are none the sum is exactly 0. Kept in a list with swap-removal.
-    std::vector<std::uint32_t> sloped;
-    std::vector<std::uint32_t> slopedAt(n, UINT32_MAX);
+    sloped.clear();
+    slopedAt.assign(n, UINT32_MAX);
     // Inputs of positive weight whose current value is exactly 0, per channel:
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
-    std::vector<unsigned char> atZero(n * nc, 0);
+    atZero.assign(n * nc, 0);
     std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
     std::size_t positive = 0;
     for (std::size_t k = 0; k < n; ++k) positive += w[k] > 0.0;
 
     // Inputs of weight 0 take part too: they add nothing to the value, but
     // their depths and sample counts belong to the output.
-    std::priority_queue<Event, std::vector<Event>, Later> heap;
+    heap.clear();
     for (std::size_t k = 0; k < n; ++k)
-        if (!inputs[k].empty()) heap.push({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+        if (!inputs[k].empty()) heap.push_back({inputs[k].z(0), static_cast<std::uint32_t>(k)});
+    std::sort(heap.begin(), heap.end(), earlier);  // sorted is a heap
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
@@ -91,7 +148,7 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
     double zCurrent = 0.0;
 
     while (!heap.empty()) {
-        const float z = heap.top().z;
+        const float z = heap.front().z;
         for (std::size_t c = 0; c < nc; ++c) {
             left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
             left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
@@ -100,10 +157,9 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
         zCurrent = z;
 
         std::uint64_t count = 0;
-        while (!heap.empty() && heap.top().z == z) {
-            const std::size_t k = heap.top().input;
-            heap.pop();
-            const VisibilityFunction& f = inputs[k];
+        while (!heap.empty() && heap.front().z == z) {
+            const std::size_t k = heap.front().input;
+            const Input& f = inputs[k];
             const std::size_t first = next[k];
             std::size_t last = first;
             count += f.count(first);
@@ -146,7 +202,13 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
                 slopedAt[k] = UINT32_MAX;
             }
             next[k] = last + 1;
-            if (more) heap.push({f.z(last + 1), static_cast<std::uint32_t>(k)});
+            if (more) {
+                heap.front() = {f.z(last + 1), static_cast<std::uint32_t>(k)};
+            } else {
+                heap.front() = heap.back();
+                heap.pop_back();
+            }
+            if (!heap.empty()) siftDown(heap, 0);
         }
 
         bool step = false;

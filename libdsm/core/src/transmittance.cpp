@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
 #include <vector>
 
 #include "dsm/error.h"
@@ -44,43 +45,78 @@ bool blocksNothing(const SurfaceHit& h, int channels) {
     return true;
 }
 
+// Sorts `items` by depth, equal depths in their given order (what
+// std::stable_sort does, without the buffer it allocates on every call):
+// through a permutation sorted by (depth, index) and a scratch copy.
+template <class T>
+void sortByDepth(std::vector<T>& items, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
+    if (std::is_sorted(items.begin(), items.end(), [](const T& a, const T& b) { return a.z < b.z; })) return;
+    order.resize(items.size());
+    for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
+        return items[a].z < items[b].z || (items[a].z == items[b].z && a < b);
+    });
+    scratch.resize(items.size());
+    for (std::size_t i = 0; i < order.size(); ++i) scratch[i] = items[order[i]];
+    items.swap(scratch);
+}
+
 }  // namespace
 
+struct TransmittanceBuilder::Impl {
+    std::vector<SurfaceHit> hits, hitScratch;
+    std::vector<VolumeSample> volume, volumeScratch;
+    std::vector<std::uint32_t> order;
+    std::vector<double> volumeTau;
+};
+
+TransmittanceBuilder::TransmittanceBuilder() : impl_(std::make_unique<Impl>()) {}
+TransmittanceBuilder::~TransmittanceBuilder() = default;
+TransmittanceBuilder::TransmittanceBuilder(TransmittanceBuilder&&) noexcept = default;
+TransmittanceBuilder& TransmittanceBuilder::operator=(TransmittanceBuilder&&) noexcept = default;
+
 VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts, float zStart) {
+    VisibilityFunction out;  // build() gives it the channels and counts asked for
+    TransmittanceBuilder().build(ray, channels, withCounts, zStart, out);
+    return out;
+}
+
+void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCounts, float zStart,
+                                 VisibilityFunction& out) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
     checkHits(ray.hits, channels);
     checkVolume(ray.volume);
 
-    std::vector<SurfaceHit> hits;
-    hits.reserve(ray.hits.size());
+    std::vector<SurfaceHit>& hits = impl_->hits;
+    hits.clear();
     for (const SurfaceHit& h : ray.hits)
         if (h.z > zStart && !blocksNothing(h, channels)) hits.push_back(h);
-    std::stable_sort(hits.begin(), hits.end(), [](const SurfaceHit& a, const SurfaceHit& b) { return a.z < b.z; });
+    sortByDepth(hits, impl_->order, impl_->hitScratch);
 
-    std::vector<VolumeSample> volume(ray.volume.begin(), ray.volume.end());
-    std::stable_sort(volume.begin(), volume.end(),
-                     [](const VolumeSample& a, const VolumeSample& b) { return a.z < b.z; });
+    std::vector<VolumeSample>& volume = impl_->volume;
+    volume.assign(ray.volume.begin(), ray.volume.end());
+    sortByDepth(volume, impl_->order, impl_->volumeScratch);
     // Keep only the volume beyond zStart, cutting a straddling segment at zStart.
     {
         const auto firstBeyond = std::find_if(volume.begin(), volume.end(),
                                               [&](const VolumeSample& s) { return s.z > zStart; });
-        if (firstBeyond != volume.begin()) {
-            std::vector<VolumeSample> kept;
-            if (firstBeyond != volume.end()) {
-                const VolumeSample& a = *(firstBeyond - 1);
-                const VolumeSample& b = *firstBeyond;
-                const double t = (static_cast<double>(zStart) - a.z) / (static_cast<double>(b.z) - a.z);
-                kept.push_back({zStart, static_cast<float>(a.extinction + t * (b.extinction - a.extinction))});
-            }
-            kept.insert(kept.end(), firstBeyond, volume.end());
-            volume = std::move(kept);
+        if (firstBeyond == volume.end()) {
+            volume.clear();
+        } else if (firstBeyond != volume.begin()) {
+            const VolumeSample& a = *(firstBeyond - 1);
+            const VolumeSample& b = *firstBeyond;
+            const double t = (static_cast<double>(zStart) - a.z) / (static_cast<double>(b.z) - a.z);
+            const VolumeSample cut{zStart, static_cast<float>(a.extinction + t * (b.extinction - a.extinction))};
+            *(firstBeyond - 1) = cut;
+            volume.erase(volume.begin(), firstBeyond - 1);
         }
     }
 
     // Volume transmittance at every volume sample, from the accumulated optical
     // depth (one exp per sample keeps the product accurate and underflow exact).
-    std::vector<double> volumeTau(volume.size(), 1.0);
+    std::vector<double>& volumeTau = impl_->volumeTau;
+    volumeTau.assign(volume.size(), 1.0);
     double opticalDepth = 0.0;
     for (std::size_t i = 1; i < volume.size(); ++i) {
         const double dz = static_cast<double>(volume[i].z) - volume[i - 1].z;
@@ -88,7 +124,10 @@ VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCo
         volumeTau[i] = std::exp(-opticalDepth);
     }
 
-    VisibilityFunction out(channels, withCounts);
+    if (out.channels() == channels && out.hasCounts() == withCounts)
+        out.clear();
+    else
+        out = VisibilityFunction(channels, withCounts);
     out.reserve(2 * hits.size() + volume.size());
     double surfaceTau[kMaxChannels] = {1.0, 1.0, 1.0};
     float emitted[kMaxChannels];
@@ -143,7 +182,6 @@ VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCo
         }
         if (hitCount > 0) emit(z, tauV, withCounts ? hitCount : 0);
     }
-    return out;
 }
 
 DSM_NAMESPACE_END

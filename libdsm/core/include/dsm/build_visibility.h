@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 
 #include "dsm/compressor.h"
 #include "dsm/transmittance.h"
@@ -35,5 +36,34 @@ struct PixelTimings {
 };
 DSM_API VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,
                                    const CompressorOptions& options, PixelTimings* timings = nullptr);
+
+/// buildVisibility() with its working memory (transmittances, the sweep's
+/// state and output, the compressor) kept between pixels, for a caller that
+/// builds many pixels with one set of options on one thread: once its buffers
+/// have grown to the largest pixel, a pixel allocates only its result. Not
+/// thread-safe: one per thread.
+class DSM_API PixelBuilder {
+public:
+    /// Throws dsm::Error for bad options, as the compressor does.
+    explicit PixelBuilder(const CompressorOptions& options);
+    ~PixelBuilder();
+    PixelBuilder(PixelBuilder&&) noexcept;
+    PixelBuilder& operator=(PixelBuilder&&) noexcept;
+
+    /// buildVisibility(rays, weights, options, timings).
+    VisibilityFunction build(Span<const SampleRay> rays, Span<const double> weights, PixelTimings* timings = nullptr);
+
+    /// The same from the rays' transmittances built beforehand (so that a ray
+    /// shared by several pixels is built once): transmittances[k] must equal
+    /// transmittance(rays[k], options.channels, options.keepCounts). The rays
+    /// themselves are read only to start the layers after the first (MTSM).
+    /// `timings` receives no transmittance time for the given functions.
+    VisibilityFunction build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
+                             Span<const double> weights, PixelTimings* timings = nullptr);
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 DSM_NAMESPACE_END

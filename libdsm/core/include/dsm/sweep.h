@@ -2,6 +2,7 @@
 // (Lokovic & Veach 2000, §5.1, equation 1).
 #pragma once
 
+#include <memory>
 #include <optional>
 
 #include "dsm/span.h"
@@ -34,5 +35,27 @@ DSM_NAMESPACE_BEGIN
 /// took every vertex.
 DSM_API std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
                            int channels, VertexSink& sink);
+
+/// sweep() with its working memory (heap, per-input state) kept between
+/// calls, for a caller that sweeps many pixels on one thread: once its buffers
+/// have grown to the most inputs, sweeping allocates nothing. Same results and
+/// errors as sweep(), over functions or views of them. Not thread-safe: one
+/// per thread.
+class DSM_API Sweeper {
+public:
+    Sweeper();
+    ~Sweeper();
+    Sweeper(Sweeper&&) noexcept;
+    Sweeper& operator=(Sweeper&&) noexcept;
+
+    std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
+                               VertexSink& sink);
+    std::optional<float> sweep(Span<const VisibilityView> inputs, Span<const double> weights, int channels,
+                               VertexSink& sink);
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 DSM_NAMESPACE_END

@@ -3,6 +3,7 @@
 
 #include <array>
 #include <limits>
+#include <memory>
 
 #include "dsm/span.h"
 #include "dsm/version.h"
@@ -52,5 +53,26 @@ struct SampleRay {
 /// negative extinction.
 DSM_API VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCounts,
                                  float zStart = -std::numeric_limits<float>::infinity());
+
+/// transmittance() with its working memory (the sorted copies of a ray's hits
+/// and volume samples) kept between rays, for a caller that builds many on one
+/// thread: once the buffers and `out` have grown to the largest ray, building
+/// allocates nothing. Not thread-safe: one per thread.
+class DSM_API TransmittanceBuilder {
+public:
+    TransmittanceBuilder();
+    ~TransmittanceBuilder();
+    TransmittanceBuilder(TransmittanceBuilder&&) noexcept;
+    TransmittanceBuilder& operator=(TransmittanceBuilder&&) noexcept;
+
+    /// Replaces `out` by transmittance(ray, channels, withCounts, zStart),
+    /// reusing its storage. Same checks and errors; `out` is unspecified
+    /// after an error.
+    void build(const SampleRay& ray, int channels, bool withCounts, float zStart, VisibilityFunction& out);
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 DSM_NAMESPACE_END
