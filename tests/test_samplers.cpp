@@ -186,4 +186,44 @@ TEST(RayCaster, FindsEveryCrossingOfMovingSurfacesAtTheRaysTime) {
     expectEveryCrossingFound(scene, rng);
 }
 
+// Hair is found through Embree's own ribbons, whose float test decides only
+// which segments the exact test then sees: rays that pass a segment just
+// inside its half-width, anywhere along it up to its ends, from near and
+// far, must get the exact test's crossing of that segment.
+TEST(RayCaster, FindsHairCrossingsAtTheRibbonsEdges) {
+    const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");
+    const dsm::RayCaster caster(scene);
+    const dsm::ScenePrimitives& surfaces = caster.surfaces();
+    const std::vector<dsm::Primitive>& all = surfaces.all();
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const auto sub = [](const dsm::Vec3& a, const dsm::Vec3& b) { return dsm::Vec3{a[0] - b[0], a[1] - b[1], a[2] - b[2]}; };
+    std::size_t edgeCrossings = 0;
+    for (int r = 0; r < 3000; ++r) {
+        const dsm::Primitive& p = all[rng() % all.size()];
+        ASSERT_EQ(p.kind, dsm::PrimitiveKind::Segment);
+        const dsm::ScenePrimitives::Segment& seg = surfaces.segment(p);
+        const double along = r % 10 == 0 ? 0.0 : r % 10 == 1 ? 1.0 - 1e-12 : unit(rng);
+        const dsm::Vec3 axis = sub(seg.p1, seg.p0);
+        const dsm::Vec3 d{unit(rng) - 0.5, unit(rng) - 0.5, unit(rng) - 0.5};
+        dsm::Vec3 side{d[1] * axis[2] - d[2] * axis[1], d[2] * axis[0] - d[0] * axis[2], d[0] * axis[1] - d[1] * axis[0]};
+        const double sideLength = std::sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2]);
+        const double gap = (seg.r0 + along * (seg.r1 - seg.r0)) * (1.0 - 1e-9);
+        const double distance = r % 3 == 0 ? 0.5 : r % 3 == 1 ? 20.0 : 5e4;
+        dsm::Vec3 origin;
+        for (std::size_t a = 0; a < 3; ++a)
+            origin[a] = seg.p0[a] + along * axis[a] + side[a] / sideLength * gap - distance * d[a];
+        std::vector<dsm::RaySurfaceHit> exact, found;
+        surfaces.intersect(p, origin, d, 0.0, 0.0, exact);
+        if (exact.empty()) continue;  // the far origin's rounding put the ray just outside
+        ++edgeCrossings;
+        caster.surfaceHits(origin, d, 0.0, 0.0, found);
+        const bool present = std::any_of(found.begin(), found.end(), [&](const dsm::RaySurfaceHit& h) {
+            return h.t == exact[0].t && h.object == exact[0].object;
+        });
+        ASSERT_TRUE(present) << "ray " << r;
+    }
+    EXPECT_GT(edgeCrossings, 1500u);
+}
+
 }  // namespace

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <string>
+#include <utility>
 #include <type_traits>
 
 #include "dsm/error.h"
@@ -58,7 +59,9 @@ struct VolumeData {
 constexpr double kBoxSlack = 1e-5;
 
 // One object's primitives (consecutive in ScenePrimitives::all()), as one
-// Embree user geometry.
+// Embree geometry: hair as Embree's own ray-facing ribbons, widened by `pad`
+// (found through oriented boxes around the strands, far tighter than
+// axis-aligned ones around diagonal hair), other surfaces as user geometry.
 struct ObjectGeometry {
     const ScenePrimitives* surfaces;
     std::uint32_t first;
@@ -105,6 +108,19 @@ void primitiveHits(const RTCIntersectFunctionNArguments* args) {
         if (args->valid[i] != 0) g.surfaces->intersect(p, c.origin, c.direction, c.time, c.tMin, *c.out);
 }
 
+// The same for a widened ribbon Embree's float test met: the exact test on
+// the segment decides, and Embree is told to go on.
+void segmentHits(const RTCFilterFunctionNArguments* args) {
+    const ObjectGeometry& g = *static_cast<const ObjectGeometry*>(args->geometryUserPtr);
+    const HitContext& c = *reinterpret_cast<const HitContext*>(args->context);
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        const Primitive& p = g.surfaces->all()[g.first + RTCHitN_primID(args->hit, args->N, i)];
+        g.surfaces->intersect(p, c.origin, c.direction, c.time, c.tMin, *c.out);
+        args->valid[i] = 0;
+    }
+}
+
 }  // namespace
 
 struct RayCaster::Impl {
@@ -122,8 +138,36 @@ struct RayCaster::Impl {
     RTCScene embreeScene = nullptr;
     std::vector<ObjectGeometry> geometries;
     Bounds3 sceneBox;  // every surface over the shutter, padded like the primitives
+    double pad = 0.0;
 
-    // Embree's hierarchy over the surfaces: one user geometry per object,
+    // Segments [first, end) as Embree ribbons of two vertices each, at the
+    // shutter's start and, when they move, its end; every radius is widened
+    // by `pad`, so that Embree's float test meets every segment the exact
+    // test crosses (the widening is orders beyond the rounding).
+    void addRibbons(OwnedGeometry& g, std::size_t first, std::size_t end, double pad, const Vec3& motion, bool moving,
+                    const std::string& what) {
+        const std::vector<Primitive>& primitives = surfaces.all();
+        const std::size_t count = end - first;
+        for (unsigned step = 0; step < (moving ? 2u : 1u); ++step) {
+            auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_VERTEX, step,
+                                                                  RTC_FORMAT_FLOAT4, 4 * sizeof(float), 2 * count));
+            throwIfEmbreeFailed(device, "ray caster", detail::concat("allocating the vertices of ", what));
+            const Vec3 offset = scale(motion, static_cast<double>(step));
+            for (std::size_t i = first; i < end; ++i) {
+                const ScenePrimitives::Segment& s = surfaces.segment(primitives[i]);
+                for (const auto& [point, radius] : {std::pair{s.p0, s.r0}, std::pair{s.p1, s.r1}}) {
+                    for (std::size_t a = 0; a < 3; ++a) *v++ = static_cast<float>(point[a] + offset[a]);
+                    *v++ = static_cast<float>(radius + pad);
+                }
+            }
+        }
+        auto* index = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_INDEX, 0,
+                                                                     RTC_FORMAT_UINT, sizeof(unsigned), count));
+        throwIfEmbreeFailed(device, "ray caster", detail::concat("allocating the segments of ", what));
+        for (std::size_t k = 0; k < count; ++k) index[k] = static_cast<unsigned>(2 * k);
+    }
+
+    // Embree's hierarchy over the surfaces: one geometry per object,
     // with a second time step for a moving one (its boxes follow it).
     void build(const Scene& scene) {
         const std::vector<Primitive>& primitives = surfaces.all();
@@ -131,7 +175,7 @@ struct RayCaster::Impl {
         for (const Primitive& p : primitives) sceneBox.grow(surfaces.bounds(p));
         double size = 0.0;
         for (std::size_t a = 0; a < 3; ++a) size = std::max({size, std::abs(sceneBox.lo[a]), std::abs(sceneBox.hi[a])});
-        const double pad = kBoxSlack * size + std::numeric_limits<double>::min();
+        pad = kBoxSlack * size + std::numeric_limits<double>::min();
         sceneBox.pad(pad);
 
         constexpr const char* who = "ray caster";
@@ -152,13 +196,19 @@ struct RayCaster::Impl {
             const bool moving = m[0] != 0.0 || m[1] != 0.0 || m[2] != 0.0;
             geometries.push_back({&surfaces, static_cast<std::uint32_t>(first), pad});
             const std::string what = detail::concat("object ", object, " '", detail::clip(scene.objects[object].name), "'");
-            OwnedGeometry g(rtcNewGeometry(device, RTC_GEOMETRY_TYPE_USER));
+            const bool hair = primitives[first].kind == PrimitiveKind::Segment;  // a curves object has only segments
+            OwnedGeometry g(rtcNewGeometry(device, hair ? RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE : RTC_GEOMETRY_TYPE_USER));
             throwIfEmbreeFailed(device, who, detail::concat("creating the geometry of ", what));
-            rtcSetGeometryUserPrimitiveCount(g.handle, static_cast<unsigned>(end - first));
             if (moving) rtcSetGeometryTimeStepCount(g.handle, 2);
             rtcSetGeometryUserData(g.handle, &geometries.back());
-            rtcSetGeometryBoundsFunction(g.handle, primitiveBounds, nullptr);
-            rtcSetGeometryIntersectFunction(g.handle, primitiveHits);
+            if (hair) {
+                addRibbons(g, first, end, pad, m, moving, what);
+                rtcSetGeometryIntersectFilterFunction(g.handle, segmentHits);
+            } else {
+                rtcSetGeometryUserPrimitiveCount(g.handle, static_cast<unsigned>(end - first));
+                rtcSetGeometryBoundsFunction(g.handle, primitiveBounds, nullptr);
+                rtcSetGeometryIntersectFunction(g.handle, primitiveHits);
+            }
             rtcCommitGeometry(g.handle);
             rtcAttachGeometry(embreeScene, g.handle);
             throwIfEmbreeFailed(device, who, detail::concat("on ", what));
@@ -206,7 +256,9 @@ void RayCaster::surfaceHits(const Vec3& origin, const Vec3& direction, double ti
     // Embree's ray starts where this one enters the scene's box, so that its
     // rounding to floats is relative to the scene's size, not to the origin's
     // distance; the crossings' parameters are computed on the original ray.
-    const Vec3 start = add(origin, scale(direction, t0));
+    // It starts a little before, so that crossings just beyond tMin lie
+    // well inside Embree's [0, infinity) whatever its float arithmetic.
+    const Vec3 start = add(origin, scale(direction, t0 - s.pad / std::sqrt(dot(direction, direction))));
     RTCRayHit rayHit{};
     RTCRay& ray = rayHit.ray;
     ray.org_x = static_cast<float>(start[0]);

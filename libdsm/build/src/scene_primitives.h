@@ -85,6 +85,9 @@ public:
     const std::vector<Primitive>& all() const { return primitives_; }
     std::size_t size() const { return primitives_.size(); }
 
+    /// The hair segment `p` is (p.kind == PrimitiveKind::Segment).
+    const Segment& segment(const Primitive& p) const { return segments_[p.index]; }
+
     /// How far an object moves over the shutter (its linear motion), per object index.
     const Vec3& motion(std::uint32_t object) const { return motion_[object]; }
 
