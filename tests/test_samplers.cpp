@@ -130,7 +130,7 @@ std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& r
     const std::vector<dsm::Primitive>& all = surfaces.all();
     if (all.empty()) return 0;
     // Each ray is checked against every primitive: fewer rays through more primitives.
-    const std::size_t rays = std::clamp<std::size_t>(20'000'000 / all.size(), 50, 3000);
+    const std::size_t rays = std::clamp<std::size_t>(10'000'000 / all.size(), 50, 3000);
     std::size_t crossings = 0;
     for (std::size_t r = 0; r < rays; ++r) {
         const double time = unit(rng);

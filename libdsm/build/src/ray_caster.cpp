@@ -50,13 +50,15 @@ struct VolumeData {
     double step;
 };
 
-// Embree's bounds are floats, and so is the ray it traverses with: every box
-// is widened by this much of the scene's size (its largest coordinate), far
-// more than the rounding of the ray's origin (rebased onto the scene's box),
-// direction, time and the boxes' interpolation over the shutter (all of order
-// 1e-7 of it), so that the float traversal reaches every primitive the exact
-// test in double precision crosses.
+// Embree's bounds and ribbons are floats, and so is the ray it traverses
+// with: every box and ribbon is widened by this much of the scene's size (its
+// largest coordinate), far more than the rounding of the ray's origin
+// (rebased onto the scene's box), direction, time, the vertices and their
+// interpolation over the shutter (all of order 1e-7 of it), so that Embree
+// reaches every primitive the exact test in double precision crosses.
 constexpr double kBoxSlack = 1e-5;
+
+constexpr const char* kWho = "ray caster";  // in Embree's errors
 
 // One object's primitives (consecutive in ScenePrimitives::all()), as one
 // Embree geometry: hair as Embree's own ray-facing ribbons, widened by `pad`
@@ -144,14 +146,14 @@ struct RayCaster::Impl {
     // shutter's start and, when they move, its end; every radius is widened
     // by `pad`, so that Embree's float test meets every segment the exact
     // test crosses (the widening is orders beyond the rounding).
-    void addRibbons(OwnedGeometry& g, std::size_t first, std::size_t end, double pad, const Vec3& motion, bool moving,
+    void addRibbons(OwnedGeometry& g, std::size_t first, std::size_t end, const Vec3& motion, bool moving,
                     const std::string& what) {
         const std::vector<Primitive>& primitives = surfaces.all();
         const std::size_t count = end - first;
         for (unsigned step = 0; step < (moving ? 2u : 1u); ++step) {
             auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_VERTEX, step,
                                                                   RTC_FORMAT_FLOAT4, 4 * sizeof(float), 2 * count));
-            throwIfEmbreeFailed(device, "ray caster", detail::concat("allocating the vertices of ", what));
+            throwIfEmbreeFailed(device, kWho, detail::concat("allocating the vertices of ", what));
             const Vec3 offset = scale(motion, static_cast<double>(step));
             for (std::size_t i = first; i < end; ++i) {
                 const ScenePrimitives::Segment& s = surfaces.segment(primitives[i]);
@@ -163,7 +165,7 @@ struct RayCaster::Impl {
         }
         auto* index = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_INDEX, 0,
                                                                      RTC_FORMAT_UINT, sizeof(unsigned), count));
-        throwIfEmbreeFailed(device, "ray caster", detail::concat("allocating the segments of ", what));
+        throwIfEmbreeFailed(device, kWho, detail::concat("allocating the segments of ", what));
         for (std::size_t k = 0; k < count; ++k) index[k] = static_cast<unsigned>(2 * k);
     }
 
@@ -178,10 +180,9 @@ struct RayCaster::Impl {
         pad = kBoxSlack * size + std::numeric_limits<double>::min();
         sceneBox.pad(pad);
 
-        constexpr const char* who = "ray caster";
-        device = newEmbreeDevice(who);
+        device = newEmbreeDevice(kWho);
         embreeScene = rtcNewScene(device);
-        throwIfEmbreeFailed(device, who, "creating a scene");
+        throwIfEmbreeFailed(device, kWho, "creating a scene");
         // Robust traversal: conservative box tests, so no primitive in reach is skipped.
         rtcSetSceneFlags(embreeScene, RTC_SCENE_FLAG_ROBUST);
         std::size_t objects = 0;
@@ -198,11 +199,11 @@ struct RayCaster::Impl {
             const std::string what = detail::concat("object ", object, " '", detail::clip(scene.objects[object].name), "'");
             const bool hair = primitives[first].kind == PrimitiveKind::Segment;  // a curves object has only segments
             OwnedGeometry g(rtcNewGeometry(device, hair ? RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE : RTC_GEOMETRY_TYPE_USER));
-            throwIfEmbreeFailed(device, who, detail::concat("creating the geometry of ", what));
+            throwIfEmbreeFailed(device, kWho, detail::concat("creating the geometry of ", what));
             if (moving) rtcSetGeometryTimeStepCount(g.handle, 2);
             rtcSetGeometryUserData(g.handle, &geometries.back());
             if (hair) {
-                addRibbons(g, first, end, pad, m, moving, what);
+                addRibbons(g, first, end, m, moving, what);
                 rtcSetGeometryIntersectFilterFunction(g.handle, segmentHits);
             } else {
                 rtcSetGeometryUserPrimitiveCount(g.handle, static_cast<unsigned>(end - first));
@@ -211,11 +212,11 @@ struct RayCaster::Impl {
             }
             rtcCommitGeometry(g.handle);
             rtcAttachGeometry(embreeScene, g.handle);
-            throwIfEmbreeFailed(device, who, detail::concat("on ", what));
+            throwIfEmbreeFailed(device, kWho, detail::concat("on ", what));
             first = end;
         }
         rtcCommitScene(embreeScene);
-        throwIfEmbreeFailed(device, who, "building the hierarchy");
+        throwIfEmbreeFailed(device, kWho, "building the hierarchy");
     }
 };
 
