@@ -3,10 +3,13 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <numeric>
+#include <string>
+#include <utility>
+#include <type_traits>
 
 #include "dsm/error.h"
 #include "affine.h"
+#include "embree_device.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -47,131 +50,174 @@ struct VolumeData {
     double step;
 };
 
-struct Node {
-    Bounds3 box;
-    std::uint32_t first = 0;  // leaf: first primitive; inner: left child
-    std::uint32_t right = 0;  // inner: right child
-    std::uint32_t count = 0;  // > 0 for a leaf
+// Embree's bounds and ribbons are floats, and so is the ray it traverses
+// with: every box and ribbon is widened by this much of the scene's size (its
+// largest coordinate), far more than the rounding of the ray's origin
+// (rebased onto the scene's box), direction, time, the vertices and their
+// interpolation over the shutter (all of order 1e-7 of it), so that Embree
+// reaches every primitive the exact test in double precision crosses.
+constexpr double kBoxSlack = 1e-5;
+
+constexpr const char* kWho = "ray caster";  // in Embree's errors
+
+// One object's primitives (consecutive in ScenePrimitives::all()), as one
+// Embree geometry: hair as Embree's own ray-facing ribbons, widened by `pad`
+// (found through oriented boxes around the strands, far tighter than
+// axis-aligned ones around diagonal hair), other surfaces as user geometry.
+struct ObjectGeometry {
+    const ScenePrimitives* surfaces;
+    std::uint32_t first;
+    double pad;
 };
+
+// The context handed to Embree: Embree's part first, so the callbacks can
+// recover the rest from the RTCIntersectContext pointer they are given.
+struct HitContext {
+    RTCIntersectContext embree;
+    // The ray in double precision, as the caller gave it.
+    Vec3 origin{}, direction{};
+    double time = 0.0;
+    double tMin = 0.0;
+    std::vector<RaySurfaceHit>* out = nullptr;
+};
+static_assert(std::is_standard_layout_v<HitContext>);
+
+void primitiveBounds(const RTCBoundsFunctionArguments* args) {
+    const ObjectGeometry& g = *static_cast<const ObjectGeometry*>(args->geometryUserPtr);
+    const Primitive& p = g.surfaces->all()[g.first + args->primID];
+    // Time step 1 (a moving object's only other one) is the shutter's end.
+    Bounds3 b = g.surfaces->boundsAt(p, static_cast<double>(args->timeStep));
+    b.pad(g.pad);
+    constexpr float kFloatInf = std::numeric_limits<float>::infinity();
+    RTCBounds& o = *args->bounds_o;
+    o.lower_x = std::nextafter(static_cast<float>(b.lo[0]), -kFloatInf);
+    o.lower_y = std::nextafter(static_cast<float>(b.lo[1]), -kFloatInf);
+    o.lower_z = std::nextafter(static_cast<float>(b.lo[2]), -kFloatInf);
+    o.upper_x = std::nextafter(static_cast<float>(b.hi[0]), kFloatInf);
+    o.upper_y = std::nextafter(static_cast<float>(b.hi[1]), kFloatInf);
+    o.upper_z = std::nextafter(static_cast<float>(b.hi[2]), kFloatInf);
+}
+
+// Records every crossing and never reports one to Embree, so that its ray
+// stays unbounded and traversal goes on to every primitive (all hits). The
+// crossing itself is the exact double-precision test the scanline sampler
+// makes, on the caller's ray rather than Embree's float copy.
+void primitiveHits(const RTCIntersectFunctionNArguments* args) {
+    const ObjectGeometry& g = *static_cast<const ObjectGeometry*>(args->geometryUserPtr);
+    const HitContext& c = *reinterpret_cast<const HitContext*>(args->context);
+    const Primitive& p = g.surfaces->all()[g.first + args->primID];
+    for (unsigned i = 0; i < args->N; ++i)
+        if (args->valid[i] != 0) g.surfaces->intersect(p, c.origin, c.direction, c.time, c.tMin, *c.out);
+}
+
+// The same for a widened ribbon Embree's float test met: the exact test on
+// the segment decides, and Embree is told to go on.
+void segmentHits(const RTCFilterFunctionNArguments* args) {
+    const ObjectGeometry& g = *static_cast<const ObjectGeometry*>(args->geometryUserPtr);
+    const HitContext& c = *reinterpret_cast<const HitContext*>(args->context);
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        const Primitive& p = g.surfaces->all()[g.first + RTCHitN_primID(args->hit, args->N, i)];
+        g.surfaces->intersect(p, c.origin, c.direction, c.time, c.tMin, *c.out);
+        args->valid[i] = 0;
+    }
+}
 
 }  // namespace
 
 struct RayCaster::Impl {
     explicit Impl(const Scene& scene) : surfaces(scene) {}
+    ~Impl() {
+        if (embreeScene != nullptr) rtcReleaseScene(embreeScene);
+        if (device != nullptr) rtcReleaseDevice(device);
+    }
+    Impl(const Impl&) = delete;
+    Impl& operator=(const Impl&) = delete;
 
     ScenePrimitives surfaces;
     std::vector<VolumeData> volumes;
-    std::vector<Node> nodes;
+    RTCDevice device = nullptr;
+    RTCScene embreeScene = nullptr;
+    std::vector<ObjectGeometry> geometries;
+    Bounds3 sceneBox;  // every surface over the shutter, padded like the primitives
+    double pad = 0.0;
 
-    void build() {
-        std::vector<Primitive>& primitives = surfaces.all();
-        if (primitives.empty()) return;
-        std::vector<Bounds3> boxes(primitives.size());
-        std::vector<Vec3> centres(primitives.size());
-        for (std::size_t i = 0; i < primitives.size(); ++i) {
-            boxes[i] = surfaces.bounds(primitives[i]);
-            centres[i] = boxes[i].centre();
-        }
-        std::vector<std::uint32_t> order(primitives.size());
-        std::iota(order.begin(), order.end(), 0u);
-        nodes.reserve(2 * primitives.size());
-        nodes.emplace_back();
-        struct Task {
-            std::uint32_t node, begin, end;
-        };
-        std::vector<Task> stack{{0, 0, static_cast<std::uint32_t>(order.size())}};
-        while (!stack.empty()) {
-            const Task task = stack.back();
-            stack.pop_back();
-            Bounds3 box, centreBounds;
-            for (std::uint32_t i = task.begin; i < task.end; ++i) {
-                box.grow(boxes[order[i]]);
-                centreBounds.grow(centres[order[i]]);
-            }
-            nodes[task.node].box = box;
-            const std::uint32_t n = task.end - task.begin;
-            std::size_t axis = 0;
-            const Vec3 extent = sub(centreBounds.hi, centreBounds.lo);
-            if (extent[1] > extent[axis]) axis = 1;
-            if (extent[2] > extent[axis]) axis = 2;
-            if (n <= 2 || extent[axis] <= 0.0) {
-                nodes[task.node].first = task.begin;
-                nodes[task.node].count = n;
-                continue;
-            }
-            // Binned surface-area heuristic on the widest axis of the centres
-            // (a good tree matters: every sample ray visits every node it
-            // crosses, since it needs all hits, not the nearest).
-            constexpr int kBins = 16;
-            Bounds3 binBounds[kBins];
-            std::uint32_t binCount[kBins] = {};
-            const double lo = centreBounds.lo[axis], width = extent[axis];
-            auto binOf = [&](std::uint32_t prim) {
-                const int b = static_cast<int>((centres[prim][axis] - lo) / width * kBins);
-                return std::clamp(b, 0, kBins - 1);
-            };
-            for (std::uint32_t i = task.begin; i < task.end; ++i) {
-                const int b = binOf(order[i]);
-                binBounds[b].grow(boxes[order[i]]);
-                ++binCount[b];
-            }
-            auto area = [](const Bounds3& b) {
-                if (b.lo[0] > b.hi[0]) return 0.0;
-                const Vec3 e = sub(b.hi, b.lo);
-                return e[0] * e[1] + e[1] * e[2] + e[2] * e[0];
-            };
-            double rightArea[kBins];
-            std::uint32_t rightCount[kBins];
-            {
-                Bounds3 acc;
-                std::uint32_t count = 0;
-                for (int b = kBins - 1; b > 0; --b) {
-                    acc.grow(binBounds[b]);
-                    count += binCount[b];
-                    rightArea[b] = area(acc);
-                    rightCount[b] = count;
+    // Segments [first, end) as Embree ribbons of two vertices each, at the
+    // shutter's start and, when they move, its end; every radius is widened
+    // by `pad`, so that Embree's float test meets every segment the exact
+    // test crosses (the widening is orders beyond the rounding).
+    void addRibbons(OwnedGeometry& g, std::size_t first, std::size_t end, const Vec3& motion, bool moving,
+                    const std::string& what) {
+        const std::vector<Primitive>& primitives = surfaces.all();
+        const std::size_t count = end - first;
+        for (unsigned step = 0; step < (moving ? 2u : 1u); ++step) {
+            auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_VERTEX, step,
+                                                                  RTC_FORMAT_FLOAT4, 4 * sizeof(float), 2 * count));
+            throwIfEmbreeFailed(device, kWho, detail::concat("allocating the vertices of ", what));
+            const Vec3 offset = scale(motion, static_cast<double>(step));
+            for (std::size_t i = first; i < end; ++i) {
+                const ScenePrimitives::Segment& s = surfaces.segment(primitives[i]);
+                for (const auto& [point, radius] : {std::pair{s.p0, s.r0}, std::pair{s.p1, s.r1}}) {
+                    for (std::size_t a = 0; a < 3; ++a) *v++ = static_cast<float>(point[a] + offset[a]);
+                    *v++ = static_cast<float>(radius + pad);
                 }
             }
-            double bestCost = std::numeric_limits<double>::infinity();
-            int bestSplit = -1;
-            {
-                Bounds3 acc;
-                std::uint32_t count = 0;
-                for (int b = 0; b + 1 < kBins; ++b) {
-                    acc.grow(binBounds[b]);
-                    count += binCount[b];
-                    if (count == 0 || rightCount[b + 1] == 0) continue;
-                    const double cost = area(acc) * count + rightArea[b + 1] * rightCount[b + 1];
-                    if (cost < bestCost) {
-                        bestCost = cost;
-                        bestSplit = b;
-                    }
-                }
-            }
-            const double leafCost = area(box) * n;
-            if (bestSplit < 0 || (n <= 4 && leafCost <= bestCost + area(box))) {
-                nodes[task.node].first = task.begin;
-                nodes[task.node].count = n;
-                continue;
-            }
-            const auto middle = std::stable_partition(order.begin() + task.begin, order.begin() + task.end,
-                                                      [&](std::uint32_t prim) { return binOf(prim) <= bestSplit; });
-            const std::uint32_t mid = static_cast<std::uint32_t>(middle - order.begin());
-            const std::uint32_t left = static_cast<std::uint32_t>(nodes.size());
-            nodes.emplace_back();
-            const std::uint32_t right = static_cast<std::uint32_t>(nodes.size());
-            nodes.emplace_back();
-            nodes[task.node].first = left;
-            nodes[task.node].right = right;
-            nodes[task.node].count = 0;
-            stack.push_back({left, task.begin, mid});
-            stack.push_back({right, mid, task.end});
         }
-        std::vector<Primitive> sorted(primitives.size());
-        for (std::size_t i = 0; i < order.size(); ++i) sorted[i] = primitives[order[i]];
-        primitives = std::move(sorted);
+        auto* index = static_cast<unsigned*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_INDEX, 0,
+                                                                     RTC_FORMAT_UINT, sizeof(unsigned), count));
+        throwIfEmbreeFailed(device, kWho, detail::concat("allocating the segments of ", what));
+        for (std::size_t k = 0; k < count; ++k) index[k] = static_cast<unsigned>(2 * k);
     }
 
+    // Embree's hierarchy over the surfaces: one geometry per object,
+    // with a second time step for a moving one (its boxes follow it).
+    void build(const Scene& scene) {
+        const std::vector<Primitive>& primitives = surfaces.all();
+        if (primitives.empty()) return;
+        for (const Primitive& p : primitives) sceneBox.grow(surfaces.bounds(p));
+        double size = 0.0;
+        for (std::size_t a = 0; a < 3; ++a) size = std::max({size, std::abs(sceneBox.lo[a]), std::abs(sceneBox.hi[a])});
+        pad = kBoxSlack * size + std::numeric_limits<double>::min();
+        sceneBox.pad(pad);
+
+        device = newEmbreeDevice(kWho);
+        embreeScene = rtcNewScene(device);
+        throwIfEmbreeFailed(device, kWho, "creating a scene");
+        // Robust traversal: conservative box tests, so no primitive in reach is skipped.
+        rtcSetSceneFlags(embreeScene, RTC_SCENE_FLAG_ROBUST);
+        std::size_t objects = 0;
+        for (std::size_t i = 0; i < primitives.size(); ++i)
+            if (i == 0 || primitives[i].object != primitives[i - 1].object) ++objects;
+        geometries.reserve(objects);  // the geometries point at their entries
+        for (std::size_t first = 0; first < primitives.size();) {
+            const std::uint32_t object = primitives[first].object;
+            std::size_t end = first + 1;
+            while (end < primitives.size() && primitives[end].object == object) ++end;
+            const Vec3& m = surfaces.motion(object);
+            const bool moving = m[0] != 0.0 || m[1] != 0.0 || m[2] != 0.0;
+            geometries.push_back({&surfaces, static_cast<std::uint32_t>(first), pad});
+            const std::string what = detail::concat("object ", object, " '", detail::clip(scene.objects[object].name), "'");
+            const bool hair = primitives[first].kind == PrimitiveKind::Segment;  // a curves object has only segments
+            OwnedGeometry g(rtcNewGeometry(device, hair ? RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE : RTC_GEOMETRY_TYPE_USER));
+            throwIfEmbreeFailed(device, kWho, detail::concat("creating the geometry of ", what));
+            if (moving) rtcSetGeometryTimeStepCount(g.handle, 2);
+            rtcSetGeometryUserData(g.handle, &geometries.back());
+            if (hair) {
+                addRibbons(g, first, end, m, moving, what);
+                rtcSetGeometryIntersectFilterFunction(g.handle, segmentHits);
+            } else {
+                rtcSetGeometryUserPrimitiveCount(g.handle, static_cast<unsigned>(end - first));
+                rtcSetGeometryBoundsFunction(g.handle, primitiveBounds, nullptr);
+                rtcSetGeometryIntersectFunction(g.handle, primitiveHits);
+            }
+            rtcCommitGeometry(g.handle);
+            rtcAttachGeometry(embreeScene, g.handle);
+            throwIfEmbreeFailed(device, kWho, detail::concat("on ", what));
+            first = end;
+        }
+        rtcCommitScene(embreeScene);
+        throwIfEmbreeFailed(device, kWho, "building the hierarchy");
+    }
 };
 
 RayCaster::RayCaster(const Scene& scene, Surfaces surfaces) : impl_(std::make_unique<Impl>(scene)) {
@@ -192,7 +238,7 @@ RayCaster::RayCaster(const Scene& scene, Surfaces surfaces) : impl_(std::make_un
         if (!(g->step > 0.0)) throw Error(ErrorCode::scene, detail::concat(what, ": volume step ", g->step, " is not > 0"));
         s.volumes.push_back(std::move(v));
     }
-    if (surfaces == Surfaces::hierarchy) s.build();
+    if (surfaces == Surfaces::hierarchy) s.build(scene);
 }
 
 RayCaster::~RayCaster() = default;
@@ -204,25 +250,37 @@ const ScenePrimitives& RayCaster::surfaces() const { return impl_->surfaces; }
 void RayCaster::surfaceHits(const Vec3& origin, const Vec3& direction, double time, double tMin,
                             std::vector<RaySurfaceHit>& out) const {
     const Impl& s = *impl_;
-    if (s.nodes.empty()) return;
+    if (s.embreeScene == nullptr) return;
     const Vec3 inv{1.0 / direction[0], 1.0 / direction[1], 1.0 / direction[2]};
-    std::uint32_t stack[128];
-    int top = 0;
-    stack[top++] = 0;
-    while (top > 0) {
-        const Node& node = s.nodes[stack[--top]];
-        double t0, t1;
-        if (!slabs(node.box, origin, inv, tMin, kInf, t0, t1)) continue;
-        if (node.count > 0) {
-            const std::vector<Primitive>& primitives = s.surfaces.all();
-            for (std::uint32_t i = node.first; i < node.first + node.count; ++i)
-                s.surfaces.intersect(primitives[i], origin, direction, time, tMin, out);
-        } else {
-            if (top + 2 > 128) throw Error(ErrorCode::internal, "ray caster: hierarchy deeper than 128 levels");
-            stack[top++] = node.right;
-            stack[top++] = node.first;
-        }
-    }
+    double t0, t1;
+    if (!slabs(s.sceneBox, origin, inv, tMin, kInf, t0, t1)) return;
+    // Embree's ray starts where this one enters the scene's box, so that its
+    // rounding to floats is relative to the scene's size, not to the origin's
+    // distance; the crossings' parameters are computed on the original ray.
+    // It starts a little before, so that crossings just beyond tMin lie
+    // well inside Embree's [0, infinity) whatever its float arithmetic.
+    const Vec3 start = add(origin, scale(direction, t0 - s.pad / std::sqrt(dot(direction, direction))));
+    RTCRayHit rayHit{};
+    RTCRay& ray = rayHit.ray;
+    ray.org_x = static_cast<float>(start[0]);
+    ray.org_y = static_cast<float>(start[1]);
+    ray.org_z = static_cast<float>(start[2]);
+    ray.dir_x = static_cast<float>(direction[0]);
+    ray.dir_y = static_cast<float>(direction[1]);
+    ray.dir_z = static_cast<float>(direction[2]);
+    ray.tnear = 0.0f;
+    ray.tfar = std::numeric_limits<float>::infinity();
+    ray.time = std::clamp(static_cast<float>(time), 0.0f, 1.0f);
+    ray.mask = ~0u;
+    rayHit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    HitContext c;
+    rtcInitIntersectContext(&c.embree);
+    c.origin = origin;
+    c.direction = direction;
+    c.time = time;
+    c.tMin = tMin;
+    c.out = &out;
+    rtcIntersect1(s.embreeScene, &c.embree, &rayHit);
 }
 
 void RayCaster::volumeSamples(const Vec3& origin, const Vec3& direction, double time, double tMin,

@@ -1,5 +1,6 @@
-// All-hits ray casting of a scene's surfaces (through a bounding volume
-// hierarchy) and volumes from the light (internal). Rays are parametrised by
+// All-hits ray casting of a scene's surfaces (through Embree's bounding volume
+// hierarchy, each primitive crossed by ScenePrimitives' exact test) and
+// volumes from the light (internal). Rays are parametrised by
 // light-space depth: a point at parameter t lies at depth t, so hit
 // parameters are map depths directly.
 #pragma once
@@ -21,12 +22,13 @@ struct RayVolumeSample {
     double extinction;  // per unit of t (depth), perspective-corrected
 };
 
-/// World-space primitives of a scene under a bounding volume hierarchy.
+/// World-space primitives of a scene under Embree's bounding volume hierarchy.
 /// Immutable after construction and safe to use from many threads.
 class DSM_TESTED_INTERNAL RayCaster {
 public:
-    /// Whether surfaceHits() may be called: the hierarchy over the surfaces
-    /// is built only when it is (the scanline sampler visits them itself).
+    /// Whether surfaceHits() may be called: Embree's hierarchy over the
+    /// surfaces is built only when it is (the scanline sampler visits them
+    /// itself).
     enum class Surfaces { hierarchy, none };
     explicit RayCaster(const Scene& scene, Surfaces surfaces = Surfaces::hierarchy);
     ~RayCaster();

@@ -76,7 +76,7 @@ ScenePrimitives::ScenePrimitives(const Scene& scene) {
     if (primitives_.size() > UINT32_MAX / 2) throw Error(ErrorCode::limit, "scene: too many primitives");
 }
 
-Bounds3 ScenePrimitives::bounds(const Primitive& p) const {
+Bounds3 ScenePrimitives::boundsAt(const Primitive& p, double time) const {
     Bounds3 b;
     switch (p.kind) {
         case PrimitiveKind::Triangle: {
@@ -116,12 +116,18 @@ Bounds3 ScenePrimitives::bounds(const Primitive& p) const {
             break;
         }
     }
+    if (time != 0.0) {
+        const Vec3 offset = scale(motion_[p.object], time);
+        b.lo = add(b.lo, offset);
+        b.hi = add(b.hi, offset);
+    }
+    return b;
+}
+
+Bounds3 ScenePrimitives::bounds(const Primitive& p) const {
     // Cover the whole shutter: the box at t = 0 and at t = 1.
-    const Vec3& m = motion_[p.object];
-    Bounds3 moved = b;
-    moved.lo = add(moved.lo, m);
-    moved.hi = add(moved.hi, m);
-    b.grow(moved);
+    Bounds3 b = boundsAt(p, 0.0);
+    b.grow(boundsAt(p, 1.0));
     return b;
 }
 

@@ -1,8 +1,8 @@
 // A scene's surfaces as world-space primitives (internal): triangles, spheres,
 // quads and hair segments (ribbons facing the ray), each moving with its
 // object, and the exact crossing of a ray with each. Shared by the ray
-// caster's hierarchy and the scanline hider, so that a sample finds the same
-// crossings whichever visits the primitives.
+// caster (through Embree's hierarchy) and the scanline hider, so that a
+// sample finds the same crossings whichever visits the primitives.
 #pragma once
 
 #include <algorithm>
@@ -41,7 +41,6 @@ struct Bounds3 {
             hi[i] += r;
         }
     }
-    Vec3 centre() const { return detail::scale(detail::add(lo, hi), 0.5); }
 };
 
 /// One surface crossing of a ray: its parameter (light depth) and object.
@@ -82,15 +81,21 @@ public:
     /// curve's points, and for singular transforms.
     explicit ScenePrimitives(const Scene& scene);
 
+    /// Every primitive; an object's primitives are consecutive, in object order.
     const std::vector<Primitive>& all() const { return primitives_; }
-    std::vector<Primitive>& all() { return primitives_; }
     std::size_t size() const { return primitives_.size(); }
+
+    /// The hair segment `p` is (p.kind == PrimitiveKind::Segment).
+    const Segment& segment(const Primitive& p) const { return segments_[p.index]; }
 
     /// How far an object moves over the shutter (its linear motion), per object index.
     const Vec3& motion(std::uint32_t object) const { return motion_[object]; }
 
     /// World bounds over the whole shutter: at time 0 and moved to time 1.
     Bounds3 bounds(const Primitive& p) const;
+
+    /// World bounds at shutter time `time` (moved by its object's motion times `time`).
+    Bounds3 boundsAt(const Primitive& p, double time) const;
 
     /// Appends every crossing of origin + t * direction with t > tMin at
     /// shutter time `time` in [0, 1) (the object's motion is undone on the

@@ -23,6 +23,7 @@
 #include <vector>
 
 #include "density.h"
+#include "embree_device.h"
 #include "dsm/error.h"
 #include "affine.h"
 #include "text.h"
@@ -43,47 +44,10 @@ constexpr double kMaxMarchSteps = 1e8;
 bool isZero(const Vec3& a) { return a[0] == 0.0 && a[1] == 0.0 && a[2] == 0.0; }
 bool isFinite(const Vec3& a) { return std::isfinite(a[0]) && std::isfinite(a[1]) && std::isfinite(a[2]); }
 
-// ---- Embree errors -------------------------------------------------------
-
-// Embree reports errors to the thread that caused them; so does this.
-thread_local std::string lastEmbreeMessage;
-
-void rememberEmbreeError(void*, RTCError, const char* message) {
-    lastEmbreeMessage = message != nullptr ? message : "";
-}
-
-const char* errorCodeName(RTCError code) {
-    switch (code) {
-        case RTC_ERROR_NONE: return "no error";
-        case RTC_ERROR_UNKNOWN: return "unknown error";
-        case RTC_ERROR_INVALID_ARGUMENT: return "invalid argument";
-        case RTC_ERROR_INVALID_OPERATION: return "invalid operation";
-        case RTC_ERROR_OUT_OF_MEMORY: return "out of memory";
-        case RTC_ERROR_UNSUPPORTED_CPU: return "unsupported CPU";
-        case RTC_ERROR_CANCELLED: return "cancelled";
-    }
-    return "unrecognised error code";
-}
-
+// Errors of the tracer's device, named as the tracer's.
 void throwIfEmbreeFailed(RTCDevice device, const std::string& doing) {
-    const RTCError code = rtcGetDeviceError(device);
-    if (code == RTC_ERROR_NONE) return;
-    const std::string message = lastEmbreeMessage.empty() ? errorCodeName(code) : lastEmbreeMessage;
-    lastEmbreeMessage.clear();
-    throw Error(ErrorCode::internal, detail::concat("reference tracer: Embree failed ", doing, ": ", message));
+    dsm::throwIfEmbreeFailed(device, "reference tracer", doing);
 }
-
-// Releases a geometry on every path out of the code that fills it (attached
-// geometries are held by the scene as well).
-struct OwnedGeometry {
-    RTCGeometry handle;
-    explicit OwnedGeometry(RTCGeometry g) : handle(g) {}
-    ~OwnedGeometry() {
-        if (handle != nullptr) rtcReleaseGeometry(handle);
-    }
-    OwnedGeometry(const OwnedGeometry&) = delete;
-    OwnedGeometry& operator=(const OwnedGeometry&) = delete;
-};
 
 // ---- What the callbacks see ----------------------------------------------
 
@@ -434,9 +398,7 @@ ReferenceTracer::ReferenceTracer(const Scene& scene, const ReferenceTracerOption
         throw Error(ErrorCode::argument,
                     detail::concat("reference tracer: volumeStepDivisor ", options.volumeStepDivisor, " is not >= 1"));
     s.volumeStepDivisor = options.volumeStepDivisor;
-    s.device = rtcNewDevice(nullptr);
-    if (s.device == nullptr) throwIfEmbreeFailed(nullptr, "creating a device");
-    rtcSetDeviceErrorFunction(s.device, rememberEmbreeError, nullptr);
+    s.device = newEmbreeDevice("reference tracer");
     s.scene = rtcNewScene(s.device);
     throwIfEmbreeFailed(s.device, "creating a scene");
     // Robust: watertight edges, for an oracle rather than speed.

@@ -23,7 +23,8 @@ enum class SamplerMethod {
     /// Primitives bucketed once into the tiles they reach, then each
     /// tested against the tile's samples under its projected bounds.
     scanline,
-    /// A ray cast per sample through a bounding volume hierarchy (the
+    /// A ray cast per sample through Embree's bounding volume hierarchy,
+    /// each primitive it reaches crossed by the same exact test (the
     /// cross-check).
     raytrace,
 };
