@@ -122,6 +122,7 @@ struct SoftShadowContext::Impl {
     double bias = 0.0;  // of the current query
     double stopBelow = 0.0;
     std::size_t layers = 1;
+    bool umbraEarlyOut = true;
     SampleAttenuation attenuation = SampleAttenuation::Subtractive;
 
     const MapInfo& info() const { return shared->reader->info; }
@@ -143,7 +144,10 @@ struct SoftShadowContext::Impl {
         return tile->pixel(std::size_t(y % T) * tile->width + x % T);
     }
 
-    bool stopped() const { return std::max({vis[0], vis[1], vis[2]}) < stopBelow; }
+    bool stopped() const {
+        const double most = std::max({vis[0], vis[1], vis[2]});
+        return most < stopBelow || (umbraEarlyOut && most <= 0.0);  // nothing left to lose
+    }
 
     // Xie §5.2 at one pixel: the ray's depth range across it, [z(ua), z(ub)],
     // widened by the z threshold, against the estimated samples of layers < K.
@@ -163,6 +167,15 @@ struct SoftShadowContext::Impl {
             const std::size_t begin = f.layerBegin(layer), end = f.layerEnd(layer);
             if (begin == end || f.z(end - 1) < lo) continue;
             if (f.z(begin) > hi) break;  // layers lie in depth order
+            if (umbraEarlyOut && f.z(begin) >= lo && f.z(begin) > consumed && f.z(end - 1) <= hi &&
+                opaqueAt(f, end - 1)) {
+                // Every sample of a layer that ends opaque: whatever the
+                // attenuation rule, the drops add up to all the light.
+                vis[0] = vis[1] = vis[2] = 0.0;
+                ++stats.raysProvenOpaque;
+                for (std::size_t i = begin; i < end; ++i) stats.samplesHit += counted ? f.count(i) : 1;
+                return;
+            }
             std::size_t i = static_cast<std::size_t>(
                 std::lower_bound(depths.begin() + static_cast<std::ptrdiff_t>(begin),
                                  depths.begin() + static_cast<std::ptrdiff_t>(end), lo,
@@ -191,6 +204,12 @@ struct SoftShadowContext::Impl {
             }
         }
         consumed = std::max(consumed, deepestHit);
+    }
+
+    static bool opaqueAt(const VisibilityView& f, std::size_t i) {
+        for (int c = 0; c < f.channels(); ++c)
+            if (f.value(i, c) > 0.0f) return false;
+        return true;
     }
 
     // A monochrome pixel's one value applies to each of the ray's channels:
@@ -244,40 +263,126 @@ struct SoftShadowContext::Impl {
     }
 
     // Xie §4.3 / §5.2: descend only into nodes whose depth range the ray's
-    // depth range meets, children in the order the ray enters them.
-    void walkNode(int g, std::uint32_t nx, std::uint32_t ny, double ua, double ub) {
-        if (g == 0) {
-            intersectPixel(nx, ny, ua, ub);
-            return;
-        }
-        ++stats.nodesVisited;
-        const DepthRange range = shared->hierarchy->node(g, nx, ny);
-        if (range.empty()) return;
-        double za = ray.z(ua), zb = ray.z(ub);
-        if (za > zb) std::swap(za, zb);
-        if (zb < range.min - zThreshold || za > range.max + zThreshold) return;
-        struct Child {
-            double ua, ub;
+    // depth range meets, children in the order the ray enters them. In
+    // single precision, relative to the start node's corner and to the ray's
+    // entry into it: per node two products give the inverse depths at the
+    // ends of its stretch of the ray and six the children's slab crossings
+    // (no division, no libm call). Each stretch is widened by a few ulps, so
+    // rounding can add a pixel but never lose one; each pixel reached is
+    // clipped again in double, so the pixels the ray crosses get the same
+    // stretch as in walkPixels.
+    void walkFrom(int g0, std::uint32_t x0, std::uint32_t y0, double ua, double ub, double rayA, double rayB) {
+        const detail::DepthHierarchy& hierarchy = *shared->hierarchy;
+        const MapInfo& m = info();
+        const int tileLevel = hierarchy.tileLevel();
+        const double fx = static_cast<double>(std::uint64_t{x0} << g0), fy = static_cast<double>(std::uint64_t{y0} << g0);
+        const auto ox = static_cast<float>(ray.r0x + ua * ray.drx - fx), oy = static_cast<float>(ray.r0y + ua * ray.dry - fy);
+        const auto dx = static_cast<float>(ray.drx), dy = static_cast<float>(ray.dry);
+        const auto length = static_cast<float>(ub - ua);
+        // Rounding bounds: positions in the frame are below 2^(g0+1), so a few
+        // ulps of that in raster units; inverse depths a few ulps of their
+        // largest term.
+        const float delta = 1e-6f * static_cast<float>(std::uint64_t{1} << g0);
+        const bool alongY = std::abs(dx) * length <= delta, alongX = std::abs(dy) * length <= delta;
+        const float invDx = alongY ? 0.0f : 1.0f / dx, invDy = alongX ? 0.0f : 1.0f / dy;
+        const float slackX = delta * std::abs(invDx) + 1e-6f * length, slackY = delta * std::abs(invDy) + 1e-6f * length;
+        // A ray (almost) parallel to an axis: its span across that axis.
+        const float xLow = std::min(ox, ox + dx * length) - delta, xHigh = std::max(ox, ox + dx * length) + delta;
+        const float yLow = std::min(oy, oy + dy * length) - delta, yHigh = std::max(oy, oy + dy * length) + delta;
+        const auto w0 = static_cast<float>(ray.invZ0 + ua * ray.dInvZ), dw = static_cast<float>(ray.dInvZ);
+        const float wError = 1e-6f * (std::abs(w0) + std::abs(dw) * length);
+        const auto W = static_cast<float>(static_cast<double>(m.width) - fx);
+        const auto H = static_cast<float>(static_cast<double>(m.height) - fy);
+        const auto zT = static_cast<float>(zThreshold);
+        const float inf = std::numeric_limits<float>::infinity();
+
+        // The column (row) the ray is in before it crosses a node's middle.
+        const int firstColumn = dx > 0.0f ? 0 : 1, firstRow = dy > 0.0f ? 0 : 1;
+
+        struct Node {
+            float ta, tb;
             std::uint32_t x, y;
-        } children[4];
-        int n = 0;
-        const double size = static_cast<double>(std::uint64_t{1} << (g - 1));  // exact, no libm call per node
-        const double W = info().width, H = info().height;
-        for (std::uint32_t j = 0; j < 2; ++j)
-            for (std::uint32_t i = 0; i < 2; ++i) {
-                const std::uint32_t cx = 2 * nx + i, cy = 2 * ny + j;
-                const double x0 = cx * size, y0 = cy * size;
-                if (x0 >= W || y0 >= H) continue;
-                double a = ua, b = ub;
-                if (!clip(ray, x0, y0, std::min(x0 + size, W), std::min(y0 + size, H), a, b)) continue;
-                Child c{a, b, cx, cy};
-                int k = n++;
-                for (; k > 0 && children[k - 1].ua > c.ua; --k) children[k] = children[k - 1];
-                children[k] = c;
+            int g;
+        };
+        Node stack[4 * 64];
+        int top = 0;
+        stack[top++] = {0.0f, length, x0, y0, g0};
+        // Depth first: the nodes below the tile grid on the stack all belong
+        // to the tile expanded last.
+        const detail::DepthHierarchy::TilePyramid* tile =
+            g0 < tileLevel ? &hierarchy.tilePyramid(x0 >> (tileLevel - g0), y0 >> (tileLevel - g0)) : nullptr;
+        while (top > 0) {
+            const Node e = stack[--top];
+            if (e.g == 0) {
+                double a = rayA, b = rayB;
+                const double px = e.x, py = e.y;
+                if (clip(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b)) {
+                    intersectPixel(e.x, e.y, a, b);
+                    if (stopped()) return;
+                }
+                continue;
             }
-        for (int k = 0; k < n; ++k) {
-            walkNode(g - 1, children[k].x, children[k].y, children[k].ua, children[k].ub);
-            if (stopped()) return;
+            ++stats.nodesVisited;
+            const int shift = tileLevel - e.g;
+            const DepthRange range =
+                e.g >= tileLevel ? hierarchy.gridNode(e.g, e.x, e.y)
+                                 : tile->at(e.g, e.x - ((e.x >> shift) << shift), e.y - ((e.y >> shift) << shift));
+            if (range.empty()) continue;
+            // The ray meets [min - zT, max + zT] where its depth 1/w does:
+            // 1/wMin >= lo and 1/wMax <= hi, w > 0.
+            const float wa = w0 + e.ta * dw, wb = w0 + e.tb * dw;
+            const float wMin = std::min(wa, wb) - wError, wMax = std::max(wa, wb) + wError;
+            if (wMin * (range.min - zT) > 1.0f + 1e-5f || wMax * (range.max + zT) < 1.0f - 1e-5f) continue;
+
+            const int cg = e.g - 1;
+            if (e.g == tileLevel && cg >= 1) tile = &hierarchy.tilePyramid(e.x, e.y);
+            // The children's stretches: the node's stretch split where the ray
+            // crosses the node's middle column and row (one product each).
+            const float xm = static_cast<float>(static_cast<double>(std::uint64_t{2 * e.x + 1} << cg) - fx);
+            const float ym = static_cast<float>(static_cast<double>(std::uint64_t{2 * e.y + 1} << cg) - fy);
+            float colA[2], colB[2], rowA[2], rowB[2];
+            float tx = -inf, ty = -inf;  // where the ray enters the second column (row)
+            if (alongY) {
+                colA[0] = colA[1] = e.ta;
+                colB[0] = xLow <= xm ? e.tb : -inf;
+                colB[1] = xHigh >= xm ? e.tb : -inf;
+            } else {
+                const float t = (xm - ox) * invDx;
+                colA[firstColumn] = e.ta;
+                colB[firstColumn] = std::min(e.tb, t + slackX);
+                colA[1 - firstColumn] = tx = std::max(e.ta, t - slackX);
+                colB[1 - firstColumn] = e.tb;
+            }
+            if (alongX) {
+                rowA[0] = rowA[1] = e.ta;
+                rowB[0] = yLow <= ym ? e.tb : -inf;
+                rowB[1] = yHigh >= ym ? e.tb : -inf;
+            } else {
+                const float t = (ym - oy) * invDy;
+                rowA[firstRow] = e.ta;
+                rowB[firstRow] = std::min(e.tb, t + slackY);
+                rowA[1 - firstRow] = ty = std::max(e.ta, t - slackY);
+                rowB[1 - firstRow] = e.tb;
+            }
+            if (xm >= W) colB[1] = -inf;  // beyond the map's edge
+            if (ym >= H) rowB[1] = -inf;
+            // Entered in the order: first column and row, then the crossing
+            // that comes first, then the other; pushed last-first.
+            const int c0 = firstColumn, r0 = firstRow;
+            const auto push = [&](int i, int j) {
+                const float ca = std::max(colA[i], rowA[j]), cb = std::min(colB[i], rowB[j]);
+                if (ca <= cb)
+                    stack[top++] = {ca, cb, 2 * e.x + static_cast<std::uint32_t>(i), 2 * e.y + static_cast<std::uint32_t>(j), cg};
+            };
+            push(1 - c0, 1 - r0);
+            if (tx <= ty) {
+                push(c0, 1 - r0);
+                push(1 - c0, r0);
+            } else {
+                push(1 - c0, r0);
+                push(c0, 1 - r0);
+            }
+            push(c0, r0);
         }
     }
 
@@ -316,7 +421,7 @@ struct SoftShadowContext::Impl {
                 for (; k > 0 && starts[k - 1].ua > st.ua; --k) starts[k] = starts[k - 1];
                 starts[k] = st;
             }
-        for (int k = 0; k < n && !stopped(); ++k) walkNode(g, starts[k].x, starts[k].y, starts[k].ua, starts[k].ub);
+        for (int k = 0; k < n && !stopped(); ++k) walkFrom(g, starts[k].x, starts[k].y, starts[k].ua, starts[k].ub, ua, ub);
     }
 
     // Curtis §3.6: the smallest stored depth the light's rays to P can meet,
@@ -415,6 +520,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     if (!s.begin(receiverWorld, options, result, p, prx, pry)) return result;
     s.stopBelow = options.visibilityThreshold;
     s.attenuation = options.attenuation;
+    s.umbraEarlyOut = options.umbraEarlyOut;
     s.layers = static_cast<std::size_t>(std::min(options.layers.value_or(m.maxLayers), m.maxLayers));
     const double d = s.shared->light.planeDepth();
     const double zEnd = p[2] - s.bias;
