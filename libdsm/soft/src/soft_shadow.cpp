@@ -263,26 +263,43 @@ struct SoftShadowContext::Impl {
     }
 
     // Xie §4.3 / §5.2: descend only into nodes whose depth range the ray's
-    // depth range meets, children in the order the ray enters them. In
-    // single precision, relative to the start node's corner and to the ray's
-    // entry into it: per node two products give the inverse depths at the
-    // ends of its stretch of the ray and six the children's slab crossings
-    // (no division, no libm call). Each stretch is widened by a few ulps, so
-    // rounding can add a pixel but never lose one; each pixel reached is
-    // clipped again in double, so the pixels the ray crosses get the same
-    // stretch as in walkPixels.
-    void walkFrom(int g0, std::uint32_t x0, std::uint32_t y0, double ua, double ub, double rayA, double rayB) {
+    // depth range meets, children in the order the ray enters them, starting
+    // at the level g where the ray's raster box spans at most 2 x 2 nodes
+    // (Curtis §3.5), not at the root: a ray shortened by the classification
+    // covers only a few pixels. In single precision, relative to the corner
+    // of those 2 x 2 nodes and to u = ua: per node two products give the
+    // inverse depths at the ends of its stretch of the ray and two more the
+    // children's stretches, where the ray crosses the node's middle column
+    // and row (no division, no libm call). Each stretch is widened by a few
+    // ulps, so rounding can add a pixel but never lose one; each pixel
+    // reached is clipped again in double, so the pixels the ray crosses get
+    // the same stretch as in walkPixels.
+    void walkHierarchy(double ua, double ub) {
         const detail::DepthHierarchy& hierarchy = *shared->hierarchy;
         const MapInfo& m = info();
+        const double ax = ray.r0x + ua * ray.drx, bx = ray.r0x + ub * ray.drx;
+        const double ay = ray.r0y + ua * ray.dry, by = ray.r0y + ub * ray.dry;
+        const auto pixel = [](double v, std::uint32_t n) {
+            return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
+        };
+        const std::uint32_t px0 = pixel(std::min(ax, bx), m.width), px1 = pixel(std::max(ax, bx), m.width);
+        const std::uint32_t py0 = pixel(std::min(ay, by), m.height), py1 = pixel(std::max(ay, by), m.height);
+        const int g0 = std::min(static_cast<int>(std::bit_width(std::max(px1 - px0, py1 - py0))), hierarchy.topLevel());
+        if (g0 == 0) {
+            intersectPixel(px0, py0, ua, ub);
+            return;
+        }
         const int tileLevel = hierarchy.tileLevel();
-        const double fx = static_cast<double>(std::uint64_t{x0} << g0), fy = static_cast<double>(std::uint64_t{y0} << g0);
-        const auto ox = static_cast<float>(ray.r0x + ua * ray.drx - fx), oy = static_cast<float>(ray.r0y + ua * ray.dry - fy);
+        // The frame: the corner of the 2 x 2 nodes of level g0 from (bx0, by0).
+        const std::uint32_t bx0 = px0 >> g0, by0 = py0 >> g0;
+        const double fx = static_cast<double>(std::uint64_t{bx0} << g0), fy = static_cast<double>(std::uint64_t{by0} << g0);
+        const auto ox = static_cast<float>(ax - fx), oy = static_cast<float>(ay - fy);
         const auto dx = static_cast<float>(ray.drx), dy = static_cast<float>(ray.dry);
         const auto length = static_cast<float>(ub - ua);
-        // Rounding bounds: positions in the frame are below 2^(g0+1), so a few
+        // Rounding bounds: positions in the frame are below 2^(g0+2), so a few
         // ulps of that in raster units; inverse depths a few ulps of their
         // largest term.
-        const float delta = 1e-6f * static_cast<float>(std::uint64_t{1} << g0);
+        const float delta = 2e-6f * static_cast<float>(std::uint64_t{1} << g0);
         const bool alongY = std::abs(dx) * length <= delta, alongX = std::abs(dy) * length <= delta;
         const float invDx = alongY ? 0.0f : 1.0f / dx, invDy = alongX ? 0.0f : 1.0f / dy;
         const float slackX = delta * std::abs(invDx) + 1e-6f * length, slackY = delta * std::abs(invDy) + 1e-6f * length;
@@ -295,85 +312,51 @@ struct SoftShadowContext::Impl {
         const auto H = static_cast<float>(static_cast<double>(m.height) - fy);
         const auto zT = static_cast<float>(zThreshold);
         const float inf = std::numeric_limits<float>::infinity();
-
         // The column (row) the ray is in before it crosses a node's middle.
-        const int firstColumn = dx > 0.0f ? 0 : 1, firstRow = dy > 0.0f ? 0 : 1;
+        const int c0 = dx > 0.0f ? 0 : 1, r0 = dy > 0.0f ? 0 : 1;
 
         struct Node {
             float ta, tb;
             std::uint32_t x, y;
             int g;
         };
-        Node stack[4 * 64];
+        Node stack[4 * 66];
         int top = 0;
-        stack[top++] = {0.0f, length, x0, y0, g0};
-        // Depth first: the nodes below the tile grid on the stack all belong
-        // to the tile expanded last.
-        const detail::DepthHierarchy::TilePyramid* tile =
-            g0 < tileLevel ? &hierarchy.tilePyramid(x0 >> (tileLevel - g0), y0 >> (tileLevel - g0)) : nullptr;
-        while (top > 0) {
-            const Node e = stack[--top];
-            if (e.g == 0) {
-                double a = rayA, b = rayB;
-                const double px = e.x, py = e.y;
-                if (clip(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b)) {
-                    intersectPixel(e.x, e.y, a, b);
-                    if (stopped()) return;
-                }
-                continue;
-            }
-            ++stats.nodesVisited;
-            const int shift = tileLevel - e.g;
-            const DepthRange range =
-                e.g >= tileLevel ? hierarchy.gridNode(e.g, e.x, e.y)
-                                 : tile->at(e.g, e.x - ((e.x >> shift) << shift), e.y - ((e.y >> shift) << shift));
-            if (range.empty()) continue;
-            // The ray meets [min - zT, max + zT] where its depth 1/w does:
-            // 1/wMin >= lo and 1/wMax <= hi, w > 0.
-            const float wa = w0 + e.ta * dw, wb = w0 + e.tb * dw;
-            const float wMin = std::min(wa, wb) - wError, wMax = std::max(wa, wb) + wError;
-            if (wMin * (range.min - zT) > 1.0f + 1e-5f || wMax * (range.max + zT) < 1.0f - 1e-5f) continue;
-
-            const int cg = e.g - 1;
-            if (e.g == tileLevel && cg >= 1) tile = &hierarchy.tilePyramid(e.x, e.y);
-            // The children's stretches: the node's stretch split where the ray
-            // crosses the node's middle column and row (one product each).
-            const float xm = static_cast<float>(static_cast<double>(std::uint64_t{2 * e.x + 1} << cg) - fx);
-            const float ym = static_cast<float>(static_cast<double>(std::uint64_t{2 * e.y + 1} << cg) - fy);
+        // Pushes the children (x + i, y + j) of level g of a stretch
+        // [ta, tb], split at the middle (xm, ym) in the frame.
+        const auto split = [&](float ta, float tb, float xm, float ym, std::uint32_t x, std::uint32_t y, int g) {
             float colA[2], colB[2], rowA[2], rowB[2];
             float tx = -inf, ty = -inf;  // where the ray enters the second column (row)
             if (alongY) {
-                colA[0] = colA[1] = e.ta;
-                colB[0] = xLow <= xm ? e.tb : -inf;
-                colB[1] = xHigh >= xm ? e.tb : -inf;
+                colA[0] = colA[1] = ta;
+                colB[0] = xLow <= xm ? tb : -inf;
+                colB[1] = xHigh >= xm ? tb : -inf;
             } else {
                 const float t = (xm - ox) * invDx;
-                colA[firstColumn] = e.ta;
-                colB[firstColumn] = std::min(e.tb, t + slackX);
-                colA[1 - firstColumn] = tx = std::max(e.ta, t - slackX);
-                colB[1 - firstColumn] = e.tb;
+                colA[c0] = ta;
+                colB[c0] = std::min(tb, t + slackX);
+                colA[1 - c0] = tx = std::max(ta, t - slackX);
+                colB[1 - c0] = tb;
             }
             if (alongX) {
-                rowA[0] = rowA[1] = e.ta;
-                rowB[0] = yLow <= ym ? e.tb : -inf;
-                rowB[1] = yHigh >= ym ? e.tb : -inf;
+                rowA[0] = rowA[1] = ta;
+                rowB[0] = yLow <= ym ? tb : -inf;
+                rowB[1] = yHigh >= ym ? tb : -inf;
             } else {
                 const float t = (ym - oy) * invDy;
-                rowA[firstRow] = e.ta;
-                rowB[firstRow] = std::min(e.tb, t + slackY);
-                rowA[1 - firstRow] = ty = std::max(e.ta, t - slackY);
-                rowB[1 - firstRow] = e.tb;
+                rowA[r0] = ta;
+                rowB[r0] = std::min(tb, t + slackY);
+                rowA[1 - r0] = ty = std::max(ta, t - slackY);
+                rowB[1 - r0] = tb;
             }
             if (xm >= W) colB[1] = -inf;  // beyond the map's edge
             if (ym >= H) rowB[1] = -inf;
+            const auto push = [&](int i, int j) {
+                const float a = std::max(colA[i], rowA[j]), b = std::min(colB[i], rowB[j]);
+                if (a <= b) stack[top++] = {a, b, x + static_cast<std::uint32_t>(i), y + static_cast<std::uint32_t>(j), g};
+            };
             // Entered in the order: first column and row, then the crossing
             // that comes first, then the other; pushed last-first.
-            const int c0 = firstColumn, r0 = firstRow;
-            const auto push = [&](int i, int j) {
-                const float ca = std::max(colA[i], rowA[j]), cb = std::min(colB[i], rowB[j]);
-                if (ca <= cb)
-                    stack[top++] = {ca, cb, 2 * e.x + static_cast<std::uint32_t>(i), 2 * e.y + static_cast<std::uint32_t>(j), cg};
-            };
             push(1 - c0, 1 - r0);
             if (tx <= ty) {
                 push(c0, 1 - r0);
@@ -383,45 +366,47 @@ struct SoftShadowContext::Impl {
                 push(c0, 1 - r0);
             }
             push(c0, r0);
-        }
-    }
-
-    // Starts the descent at the level where the ray's raster box spans at
-    // most 2 x 2 nodes (Curtis §3.5), not at the root: a ray shortened by the
-    // classification covers only a few pixels.
-    void walkHierarchy(double ua, double ub) {
-        const MapInfo& m = info();
-        const double ax = ray.r0x + ua * ray.drx, bx = ray.r0x + ub * ray.drx;
-        const double ay = ray.r0y + ua * ray.dry, by = ray.r0y + ub * ray.dry;
-        const auto pixel = [](double v, std::uint32_t n) {
-            return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
         };
-        const std::uint32_t x0 = pixel(std::min(ax, bx), m.width), x1 = pixel(std::max(ax, bx), m.width);
-        const std::uint32_t y0 = pixel(std::min(ay, by), m.height), y1 = pixel(std::max(ay, by), m.height);
-        const int top = shared->hierarchy->topLevel();
-        const int g = std::min(static_cast<int>(std::bit_width(std::max(x1 - x0, y1 - y0))), top);
-        if (g == 0) {
-            intersectPixel(x0, y0, ua, ub);
-            return;
-        }
-        struct Start {
-            double ua, ub;
-            std::uint32_t x, y;
-        } starts[4];
-        int n = 0;
-        const double size = static_cast<double>(std::uint64_t{1} << g);
-        for (std::uint32_t y = y0 >> g; y <= y1 >> g; ++y)
-            for (std::uint32_t x = x0 >> g; x <= x1 >> g; ++x) {
+        const auto size = static_cast<float>(std::uint64_t{1} << g0);
+        split(0.0f, length, size, size, bx0, by0, g0);
+
+        const detail::DepthHierarchy::TilePyramid* tile = nullptr;  // the tile (tileX, tileY)
+        std::uint32_t tileX = ~0u, tileY = ~0u;
+        while (top > 0) {
+            const Node e = stack[--top];
+            if (e.g == 0) {
                 double a = ua, b = ub;
-                if (!clip(ray, x * size, y * size, std::min((x + 1) * size, double(m.width)),
-                          std::min((y + 1) * size, double(m.height)), a, b))
-                    continue;
-                Start st{a, b, x, y};
-                int k = n++;
-                for (; k > 0 && starts[k - 1].ua > st.ua; --k) starts[k] = starts[k - 1];
-                starts[k] = st;
+                const double px = e.x, py = e.y;
+                if (clip(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b)) {
+                    intersectPixel(e.x, e.y, a, b);
+                    if (stopped()) return;
+                }
+                continue;
             }
-        for (int k = 0; k < n && !stopped(); ++k) walkFrom(g, starts[k].x, starts[k].y, starts[k].ua, starts[k].ub, ua, ub);
+            ++stats.nodesVisited;
+            DepthRange range;
+            if (e.g >= tileLevel) {
+                range = hierarchy.gridNode(e.g, e.x, e.y);
+            } else {
+                const int shift = tileLevel - e.g;
+                const std::uint32_t tx = e.x >> shift, ty = e.y >> shift;
+                if (tx != tileX || ty != tileY) {
+                    tile = &hierarchy.tilePyramid(tx, ty);
+                    tileX = tx;
+                    tileY = ty;
+                }
+                range = tile->at(e.g, e.x - (tx << shift), e.y - (ty << shift));
+            }
+            if (range.empty()) continue;
+            // The ray meets [min - zT, max + zT] where its depth 1/w does:
+            // 1/wMin >= lo and 1/wMax <= hi, w > 0.
+            const float wa = w0 + e.ta * dw, wb = w0 + e.tb * dw;
+            const float wMin = std::min(wa, wb) - wError, wMax = std::max(wa, wb) + wError;
+            if (wMin * (range.min - zT) > 1.0f + 1e-5f || wMax * (range.max + zT) < 1.0f - 1e-5f) continue;
+            const int cg = e.g - 1;
+            split(e.ta, e.tb, static_cast<float>(static_cast<double>(std::uint64_t{2 * e.x + 1} << cg) - fx),
+                  static_cast<float>(static_cast<double>(std::uint64_t{2 * e.y + 1} << cg) - fy), 2 * e.x, 2 * e.y, cg);
+        }
     }
 
     // Curtis §3.6: the smallest stored depth the light's rays to P can meet,
