@@ -7,7 +7,7 @@
 //  - g >= tileLevel: a pyramid over the tile grid, built at construction from
 //    the tile directory's minZ/maxZ;
 //  - 1 <= g < tileLevel: a mini-pyramid per tile, built the first time a ray
-//    descends into the tile and kept (published with an atomic pointer, so
+//    or minDepth() descends into the tile and kept (published with an atomic pointer, so
 //    any number of threads may ask at once; two threads may both build one
 //    and one copy is dropped, which costs time, never correctness);
 //  - g = 0: the pixel itself, which the caller reads anyway.

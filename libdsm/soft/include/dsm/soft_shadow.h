@@ -125,8 +125,10 @@ struct SoftShadowStats {
 /// A map and an area light, ready to be traced: holds the min/max depth
 /// quadtree. Its levels above the tiles come from the tile directory when the
 /// tracer is made; the levels inside a tile are built the first time a ray
-/// reaches the tile and kept for the tracer's life (about 2.7 KB per 32 x 32
-/// tile; there is no eviction). Thread-safe: share one between threads, and
+/// or the penumbra classification's search reaches the tile (so a query pays
+/// only for the tiles it touches; hierarchyTilesBuilt() counts them) and kept
+/// for the tracer's life (about 2.7 KB per 32 x 32 tile; there is no
+/// eviction). Thread-safe: share one between threads, and
 /// give each thread a SoftShadowContext.
 class DSM_API SoftShadowTracer {
 public:
