@@ -273,17 +273,35 @@ class Report:
             self.add("Columns: reference, MTSM, PCF, then the differences MTSM − reference and PCF − reference "
                      "(×4; red: too bright, blue: too dark); rows: small, medium, large light; "
                      f"N = {sc['rows'][-1]['samples']}.", "")
+            if "ray_speed" in sc:
+                r = sc["ray_speed"]
+                self.add(f"A ray through the map against a ray through the scene (one thread, medium light, 64 rays "
+                         f"for each of {r['receivers']} receivers, classification off so every ray is traced; the "
+                         "same light samples; measured one after the other): map "
+                         f"{r['map_rays_per_second'] / 1e6:.2f} M rays/s ({r['nodes_per_ray']:.1f} nodes and "
+                         f"{r['pixels_per_ray']:.1f} pixels per ray, "
+                         f"{100 * r['rays_proven_opaque'] / max(1, r['rays']):.1f} % of the rays proven opaque), "
+                         f"Embree {r['scene_rays_per_second'] / 1e6:.2f} M rays/s: "
+                         f"**{r['map_over_scene']:.2f}×**.", "")
             if "scaling" in sc:
                 body = [[f"{r['resolution']}²", f"{r['walk']['pixels_per_ray']:.1f}",
                          f"{r['walk']['microseconds_per_ray']:.2f}", f"{r['hierarchy']['pixels_per_ray']:.1f}",
                          f"{r['hierarchy']['nodes_per_ray']:.1f}", f"{r['hierarchy']['microseconds_per_ray']:.2f}",
                          f"{r['walk']['microseconds_per_ray'] / r['hierarchy']['microseconds_per_ray']:.1f}"]
+                        + ([f"{1e3 * r['first_query']['median_seconds']:.1f}",
+                            f"{r['first_query']['mean_tiles_built']:.0f} of {r['first_query']['tiles']}"]
+                           if "first_query" in r else [])
                         for r in sc["scaling"]]
+                first = "first_query" in sc["scaling"][0]
                 self.add("Cost per ray against the map's resolution (Xie §4.3; medium light, 64 rays per receiver, "
                          f"{sc['scaling'][0]['receivers']} receivers, classification off, one thread): walking every "
-                         "pixel a ray crosses against the min/max depth hierarchy.", "")
+                         "pixel a ray crosses against the min/max depth hierarchy"
+                         + ("; and the time from opening the map to the first answer (defaults, 64 rays; median "
+                            "over receivers across the view, each on a freshly opened map) with the tiles whose "
+                            "depth pyramids it built." if first else "."), "")
                 self.add(table(["map", "walk pixels/ray", "walk µs/ray", "hierarchy pixels/ray", "hierarchy nodes/ray",
-                                "hierarchy µs/ray", "walk / hierarchy time"], body), "")
+                                "hierarchy µs/ray", "walk / hierarchy time"]
+                               + (["first query ms", "pyramids built"] if first else []), body), "")
             if "knobs" in sc:
                 body = [[k["knob"], f"{k['value']:.4g}", k["samples"], k["layers"] or "all", bias_text(k["bias"]),
                          f"{k['error']['mean']:.4f} ± {k['error']['stddev']:.4f}", f"{k['mtsm_seconds']:.2f}",
@@ -378,9 +396,12 @@ class Report:
         if "soft_shadows" in self.d:
             for sc in self.d["soft_shadows"]["scenes"]:
                 r = [x for x in sc["rows"] if x["radius"] == "medium"][-1]
+                speed = (f"; a ray through the map {sc['ray_speed']['map_over_scene']:.2f}× as fast as one through "
+                         "the scene" if "ray_speed" in sc else "")
                 self.add(f"- Soft shadows, {sc['scene']} (medium light, N = {r['samples']}): MTSM error "
                          f"{r['mtsm_error']['mean']:.4f} = {r['mtsm_error']['mean'] / r['pcf_error']['mean']:.2f}× "
-                         f"PCF's, {r['reference_seconds'] / r['mtsm_seconds']:.1f}× faster than ray tracing the scene.")
+                         f"PCF's, {r['reference_seconds'] / r['mtsm_seconds']:.1f}× faster than ray tracing the scene"
+                         f"{speed}.")
         if "storage" in self.d:
             st = self.d["storage"]
             self.add(f"- OpenEXR deep (ZIPS) of the raw samples: {st['exr_bytes'] / st['dsm_bytes']:.1f}× our file.")

@@ -372,6 +372,92 @@ TEST_F(SoftShadow, HierarchyAndClassificationChangeTheCostNotTheAnswer) {
     EXPECT_GT(context.stats().nodesVisited, 0u);
 }
 
+TEST_F(SoftShadow, HierarchyWalksTheSamePixelsAsTheWalkForRaysInEveryDirection) {
+    // Receivers on a grid across the umbra, penumbra and lit floor, every ray
+    // traced (classification off, so rays start at the light and cross the
+    // map from the centre outwards in every direction, some of them along a
+    // raster axis), with and without a z threshold.
+    dsm::SoftShadowContext context(square_->tracer);
+    for (const double threshold : {0.0, 0.05})
+        for (double x = -3.0; x <= 3.0; x += 0.75)
+            for (double z = -3.0; z <= 3.0; z += 1.5) {
+                dsm::SoftShadowOptions tree = withSamples(64);
+                tree.classification = false;
+                tree.zThreshold = threshold;
+                tree.bias = kBias + threshold;
+                dsm::SoftShadowOptions walk = tree;
+                walk.hierarchy = false;
+                const Vec3 p{x, 0.0, z};
+                EXPECT_NEAR(context.visibility(p, tree).v[0], context.visibility(p, walk).v[0], 1e-9)
+                    << "receiver " << x << "," << z << " threshold " << threshold;
+            }
+}
+
+TEST_F(SoftShadow, UmbraEarlyOutStopsOpaqueRaysWithoutChangingTheAnswer) {
+    dsm::SoftShadowContext context(square_->tracer);
+    for (auto attenuation : {dsm::SampleAttenuation::Subtractive, dsm::SampleAttenuation::Multiplicative})
+        for (const double threshold : {0.0, 1e-3})
+            for (const Vec3& p : kReceivers) {
+                dsm::SoftShadowOptions on = withSamples(64);
+                on.attenuation = attenuation;
+                on.visibilityThreshold = threshold;
+                dsm::SoftShadowOptions off = on;
+                off.umbraEarlyOut = false;
+                // A ray traced on stops below the threshold, or at 0 with none.
+                EXPECT_NEAR(context.visibility(p, on).v[0], context.visibility(p, off).v[0], threshold + 1e-12)
+                    << "receiver " << p[0] << "," << p[2] << " threshold " << threshold;
+            }
+    // In the umbra of the opaque square most rays are proven opaque...
+    context.resetStats();
+    EXPECT_EQ(context.visibility({0.3, 0.0, 0.2}, withSamples(64)).v[0], 0.0);
+    EXPECT_GT(context.stats().raysProvenOpaque, 32u);
+    const auto provenRays = context.stats().raysProvenOpaque;
+    // ...only with the early-out...
+    dsm::SoftShadowOptions off = withSamples(64);
+    off.umbraEarlyOut = false;
+    context.visibility({0.3, 0.0, 0.2}, off);
+    EXPECT_EQ(context.stats().raysProvenOpaque, provenRays);
+    // ...and never behind semi-transparent layers, which cannot prove it.
+    Blocker veil;
+    veil.halfX = veil.halfZ = 15.0;
+    veil.opacity = {0.6, 0.6, 0.6};
+    const BuiltMap m = build(*dir_, "veil", {veil});
+    dsm::SoftShadowContext veiled(m.tracer);
+    EXPECT_NEAR(veiled.visibility({0.3, 0.0, 0.2}, withSamples(64)).v[0], 0.4, 0.02);
+    EXPECT_EQ(veiled.stats().raysProvenOpaque, 0u);
+}
+
+TEST_F(SoftShadow, DepthPyramidsAreBuiltOnlyForTheTilesQueriesReach) {
+    // A light of radius 0.01: a receiver's rays run from within a pixel of the
+    // map's centre (a corner of four 16 x 16 tiles) to the receiver's
+    // light-centre projection, here the centre of a tile, and reach the
+    // square's depth only in that tile: the hierarchy skips the others above
+    // the tiles (classification off: its search would look around the
+    // corner).
+    const dsm::MapInfo& info = square_->map->info();
+    const double floorDepth = info.camera.worldToLightSpace({0.0, 0.0, 0.0})[2];
+    const auto tracer = std::make_shared<dsm::SoftShadowTracer>(
+        square_->map, dsm::AreaLight::disk(info.camera, 0.01, square_->tracer->light().planeDepth()));
+    EXPECT_EQ(tracer->hierarchyTilesBuilt(), 0u);  // making the tracer reads no tile
+    auto receiverAt = [&](double rx, double ry) {
+        const auto& w = info.camera.screenWindow;
+        const double sx = w[0] + rx / info.width * (w[1] - w[0]), sy = w[3] - ry / info.height * (w[3] - w[2]);
+        return tracer->light().lightToWorld({sx * floorDepth, sy * floorDepth, floorDepth});
+    };
+    ASSERT_EQ(info.tileSize, 16u);
+    dsm::SoftShadowContext context(tracer);
+    // Tiles (4, 4) and (3, 3), both under the square (umbra).
+    const Vec3 a = receiverAt(72.0, 72.0), b = receiverAt(56.0, 56.0);
+    dsm::SoftShadowOptions o = withSamples(16);
+    o.classification = false;
+    EXPECT_LT(context.visibility(a, o).v[0], 0.05);
+    EXPECT_EQ(tracer->hierarchyTilesBuilt(), 1u);
+    EXPECT_LT(context.visibility(b, o).v[0], 0.05);
+    EXPECT_EQ(tracer->hierarchyTilesBuilt(), 2u);
+    EXPECT_LT(context.visibility(a, o).v[0], 0.05);  // kept, not built again
+    EXPECT_EQ(tracer->hierarchyTilesBuilt(), 2u);
+}
+
 TEST_F(SoftShadow, ClassificationSettlesLitPointsWithoutRays) {
     dsm::SoftShadowContext context(square_->tracer);
     const auto lit = context.visibility({0.0, 0.0, -4.5}, withSamples(64));

@@ -9,9 +9,13 @@
 // sweep of the knobs (layers K, bias, samples N) on the first two scenes. Writes
 // JSON for bench/trade_report.py and one contact sheet per scene (PNG).
 //
-//   bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] [--scenes A,B] [--threads T]
+//   bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] [--speed] [--error-budget] [--scenes A,B]
+//                      [--threads T]
 //
-// --bias-study runs only the automatic bias against constant biases.
+// --bias-study runs only the automatic bias against constant biases; --speed
+// only the cost of a ray against Embree's and the cost of the first query;
+// --error-budget only the MTSM error's sources (build filter, tolerance,
+// resolution, samples per pixel, layers, light samples), one at a time.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -19,6 +23,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -46,6 +51,8 @@ using dsm::Vec3;
 struct Config {
     bool smoke = false;
     bool biasStudyOnly = false;  // --bias-study: only the automatic bias against constants
+    bool speedOnly = false;      // --speed: only the cost of a ray and of the first query
+    bool errorBudgetOnly = false;  // --error-budget: only the error's sources, one knob at a time
     std::vector<std::string> scenes;
     std::uint32_t mapResolution = 256, mapSpp = 16;
     int mapLayers = 4;
@@ -231,6 +238,88 @@ std::string stem(const std::string& path) {
     return name.substr(0, name.find('.'));
 }
 
+/// Time to the first soft query on a map nobody has read yet: opening it,
+/// making the tracer and a context, and answering one query (defaults, 64
+/// rays), for receivers spread over the view, each with a fresh open; the
+/// median, the maximum and the depth pyramids built.
+Json firstQuery(const std::filesystem::path& path, const std::vector<Vec3>& points, double radius,
+                const dsm::Scene& scene, const dsm::SoftShadowOptions& base) {
+    const std::size_t runs = std::min<std::size_t>(15, points.size());
+    std::vector<double> times;
+    double tilesBuilt = 0.0;
+    unsigned tiles = 0;
+    for (std::size_t k = 0; k < runs; ++k) {
+        const Vec3& p = points[k * points.size() / runs];
+        const auto start = std::chrono::steady_clock::now();
+        const auto map = dsm::DeepShadowMap::open(path.string());
+        const double plane = dsm::AreaLight::disk(map->info().camera, scene.light.areaLightRadius).planeDepth();
+        const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(
+            map, dsm::AreaLight::disk(map->info().camera, radius, plane));
+        dsm::SoftShadowContext context(tracer);
+        dsm::SoftShadowOptions o = base;
+        o.samples = 64;
+        context.visibility(p, o);
+        times.push_back(seconds(start));
+        tilesBuilt += double(tracer->hierarchyTilesBuilt()) / double(runs);
+        tiles = map->info().levels[0].tilesX * map->info().levels[0].tilesY;
+    }
+    std::sort(times.begin(), times.end());
+    return Json{{"runs", runs},
+                {"median_seconds", times.empty() ? 0.0 : times[times.size() / 2]},
+                {"max_seconds", times.empty() ? 0.0 : times.back()},
+                {"mean_tiles_built", tilesBuilt},
+                {"tiles", tiles}};
+}
+
+/// Rays per second on one core through the map (MTSM with the hierarchy,
+/// classification off, so every ray is traced) and through the real scene
+/// (the Embree reference's transmittance), for the same receivers, light
+/// samples and light (medium), both including the drawing of the light
+/// samples; measured one after the other in one run.
+Json raySpeed(const std::shared_ptr<const dsm::DeepShadowMap>& map, const Receivers& receivers,
+              const dsm::ReferenceTracer& reference, double radius, double planeDepth,
+              const dsm::SoftShadowOptions& base, const std::string& name) {
+    std::vector<Vec3> points;
+    for (std::size_t i = 0; i < receivers.points.size(); i += 3)
+        if (receivers.valid[i]) points.push_back(receivers.points[i]);
+    const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radius, planeDepth);
+    const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+    dsm::SoftShadowOptions o = base;
+    o.samples = 64;
+    o.classification = false;
+    dsm::SoftShadowContext context(tracer);
+    for (const Vec3& p : points) context.visibility(p, o);  // warm: tiles decoded, pyramids built
+    context.resetStats();
+    auto start = std::chrono::steady_clock::now();
+    for (const Vec3& p : points) context.visibility(p, o);
+    const double mapSeconds = seconds(start);
+    const double mapRays = double(context.stats().rays);
+    const double opaque = double(context.stats().raysProvenOpaque);
+    start = std::chrono::steady_clock::now();
+    double sceneRays = 0.0, sink = 0.0;
+    for (const Vec3& p : points) {
+        const std::vector<Vec3> samples = light.samples(p, o.samples, o.seed);
+        for (std::size_t k = 0; k < samples.size(); ++k)
+            sink += reference.transmittance(p, samples[k], (k + 0.5) / samples.size())[0];
+        sceneRays += double(samples.size());
+    }
+    const double sceneSeconds = seconds(start);
+    const double mapRate = mapRays / std::max(1e-9, mapSeconds), sceneRate = sceneRays / std::max(1e-9, sceneSeconds);
+    std::printf("  %s rays, one core, classification off: map %.3g/s, scene (Embree) %.3g/s: map / scene %.2f "
+                "(%.0f rays each; %.1f %% of map rays proven opaque; checksum %.3g)\n",
+                name.c_str(), mapRate, sceneRate, mapRate / sceneRate, mapRays, 100.0 * opaque / std::max(1.0, mapRays),
+                sink);
+    std::fflush(stdout);
+    return Json{{"receivers", points.size()},
+                {"rays", mapRays},
+                {"map_rays_per_second", mapRate},
+                {"scene_rays_per_second", sceneRate},
+                {"map_over_scene", mapRate / sceneRate},
+                {"rays_proven_opaque", opaque},
+                {"nodes_per_ray", double(context.stats().nodesVisited) / std::max(1.0, mapRays)},
+                {"pixels_per_ray", double(context.stats().pixelsVisited) / std::max(1.0, mapRays)}};
+}
+
 /// Cost of a ray through the map against the map's resolution (Xie §4.3):
 /// the same receivers and light at 128² .. 1024², every ray walked pixel by
 /// pixel or through the min/max depth hierarchy (classification off, so
@@ -252,11 +341,11 @@ Json hierarchyScaling(const Config& config, const dsm::Scene& sceneIn, const Rec
         build.threads = config.threads;
         const auto path = config.workDir / (name + "-scaling.dsm");
         dsm::buildMap(scene, build, path.string());
+        Json row{{"resolution", size}, {"receivers", points.size()}, {"first_query", firstQuery(path, points, radius, scene, base)}};
         const auto map = dsm::DeepShadowMap::open(path.string());
         const double plane = dsm::AreaLight::disk(map->info().camera, scene.light.areaLightRadius).planeDepth();
         const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radius, plane);
         const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
-        Json row{{"resolution", size}, {"receivers", points.size()}};
         for (const bool hierarchy : {false, true}) {
             dsm::SoftShadowContext context(tracer);
             dsm::SoftShadowOptions o = base;
@@ -273,6 +362,11 @@ Json hierarchyScaling(const Config& config, const dsm::Scene& sceneIn, const Rec
                                                      {"nodes_per_ray", st.nodesVisited / rays},
                                                      {"microseconds_per_ray", 1e6 * wall / rays}};
         }
+        std::printf("  %s scaling %4u^2: first query %.2f ms (median of %d, max %.2f ms, %.1f of %u tiles' depth "
+                    "pyramids)\n",
+                    name.c_str(), size, 1e3 * row["first_query"]["median_seconds"].get<double>(),
+                    row["first_query"]["runs"].get<int>(), 1e3 * row["first_query"]["max_seconds"].get<double>(),
+                    row["first_query"]["mean_tiles_built"].get<double>(), row["first_query"]["tiles"].get<unsigned>());
         std::printf("  %s scaling %4u^2: walk %.1f px/ray %.2f us/ray | hierarchy %.1f px + %.1f nodes/ray %.2f us/ray\n",
                     name.c_str(), size, row["walk"]["pixels_per_ray"].get<double>(),
                     row["walk"]["microseconds_per_ray"].get<double>(), row["hierarchy"]["pixels_per_ray"].get<double>(),
@@ -332,6 +426,92 @@ Json biasStudy(const Config& config, const std::shared_ptr<const dsm::DeepShadow
     return out;
 }
 
+/// Where the MTSM error comes from (medium light): the default map and
+/// light samples against one change at a time (build filter, tolerance,
+/// resolution, samples per pixel, layers used, light samples) and all the
+/// build changes together. Per row the mean |MTSM - reference| over all
+/// receivers and the mean signed error over the penumbra's (the reference
+/// strictly between 0.02 and 0.98).
+Json errorBudget(const Config& config, const dsm::Scene& sceneIn, const Receivers& receivers,
+                 const dsm::ReferenceTracer& reference, double radius, double largestRadius,
+                 const dsm::SoftShadowOptions& base, const dsm::BuildOptions& defaults, const std::string& name) {
+    dsm::Scene scene = sceneIn;
+    scene.light.areaLightRadius = largestRadius;
+    struct Row {
+        std::string knob, value;
+        dsm::BuildOptions build;
+        int samples = 64;
+        std::optional<int> layers;
+    };
+    auto with = [&](auto change) {
+        dsm::BuildOptions b = defaults;
+        change(b);
+        return b;
+    };
+    const auto boxOne = [](dsm::BuildOptions& b) {
+        b.filter = dsm::PixelFilter::Box;
+        b.filterWidth = 1.0;
+    };
+    std::vector<Row> rows{
+        {"default", "", defaults, 64, std::nullopt},
+        {"filter", "box 1", with(boxOne), 64, std::nullopt},
+        {"tolerance", "0.005", with([](auto& b) { b.tolerance = 0.005; }), 64, std::nullopt},
+        {"tolerance", "0.02", with([](auto& b) { b.tolerance = 0.02; }), 64, std::nullopt},
+        {"resolution", "512", with([](auto& b) { b.width = b.height = 512u; }), 64, std::nullopt},
+        {"resolution", "1024", with([](auto& b) { b.width = b.height = 1024u; }), 64, std::nullopt},
+        {"spp", "64", with([](auto& b) { b.samplesPerPixel = 64; }), 64, std::nullopt},
+        {"layers", "1", defaults, 64, 1},
+        {"layers", "2", defaults, 64, 2},
+        {"light samples", "16", defaults, 16, std::nullopt},
+        {"light samples", "256", defaults, 256, std::nullopt},
+        {"all builds", "box 1, 0.005, 1024", with([&](auto& b) {
+             boxOne(b);
+             b.tolerance = 0.005;
+             b.width = b.height = 1024u;
+         }),
+         64, std::nullopt},
+    };
+    std::map<int, Frame> references;
+    Json out = Json::array();
+    for (const Row& row : rows) {
+        const auto path = config.workDir / (name + "-budget.dsm");
+        const dsm::BuildStats built = dsm::buildMap(scene, row.build, path.string());
+        const auto map = dsm::DeepShadowMap::open(path.string());
+        const double plane = dsm::AreaLight::disk(map->info().camera, largestRadius).planeDepth();
+        const dsm::AreaLight light = dsm::AreaLight::disk(map->info().camera, radius, plane);
+        const auto tracer = std::make_shared<const dsm::SoftShadowTracer>(map, light);
+        dsm::SoftShadowOptions o = base;
+        o.samples = row.samples;
+        o.layers = row.layers;
+        if (!references.count(row.samples))
+            references[row.samples] = render(Method::Reference, receivers, tracer, reference, light, o, config.threads);
+        const Frame& ref = references[row.samples];
+        const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads);
+        double signedSum = 0.0;
+        std::size_t penumbra = 0;
+        for (std::size_t i = 0; i < ref.v.size(); ++i)
+            if (ref.v[i] > 0.02f && ref.v[i] < 0.98f) {
+                signedSum += double(mtsm.v[i]) - ref.v[i];
+                ++penumbra;
+            }
+        const Difference d = difference(mtsm, ref);
+        const double penumbraSigned = penumbra ? signedSum / double(penumbra) : 0.0;
+        out.push_back({{"knob", row.knob},
+                       {"value", row.value},
+                       {"samples", row.samples},
+                       {"file_bytes", map->info().fileBytes},
+                       {"tolerance", built.tolerance},
+                       {"error", toJson(d)},
+                       {"penumbra_receivers", penumbra},
+                       {"penumbra_signed_error", penumbraSigned}});
+        std::printf("  %s budget %-13s %-18s err %.4f  penumbra signed %+.4f (%zu)  %.0f KiB\n", name.c_str(),
+                    row.knob.c_str(), row.value.c_str(), d.mean, penumbraSigned, penumbra,
+                    double(map->info().fileBytes) / 1024.0);
+        std::fflush(stdout);
+    }
+    return out;
+}
+
 Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bool scaling) {
     const std::string name = stem(file);
     dsm::Scene scene = dsm::loadScene(file);
@@ -369,6 +549,15 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
     out["bias"] = "auto";
     out["z_threshold"] = base.zThreshold;
 
+    if (config.errorBudgetOnly) {
+        out["error_budget"] = errorBudget(config, scene, receivers, reference, radii[1], radii[2], base, build, name);
+        return out;
+    }
+    out["ray_speed"] = raySpeed(map, receivers, reference, radii[1], planeDepth, base, name);
+    if (config.speedOnly) {
+        if (scaling) out["scaling"] = hierarchyScaling(config, scene, receivers, radii[1], base, name);
+        return out;
+    }
     if (config.biasStudyOnly) {
         out["bias_study"] = biasStudy(config, map, receivers, reference, radii[1], planeDepth, scale, base, name);
         return out;
@@ -475,13 +664,15 @@ int main(int argc, char** argv) {
         const bool hasValue = i + 1 < argc;
         if (a == "--smoke") config.smoke = true;
         else if (a == "--bias-study") config.biasStudyOnly = true;
+        else if (a == "--speed") config.speedOnly = true;
+        else if (a == "--error-budget") config.errorBudgetOnly = true;
         else if (a == "--out" && hasValue) outPath = argv[++i];
         else if (a == "--images" && hasValue) config.images = argv[++i];
         else if (a == "--scenes" && hasValue) scenes = argv[++i];
         else if (a == "--threads" && hasValue) config.threads = static_cast<unsigned>(std::stoul(argv[++i]));
         else {
             std::fprintf(stderr, "usage: bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] "
-                                 "[--scenes A,B] [--threads T]\n");
+                                 "[--speed] [--error-budget] [--scenes A,B] [--threads T]\n");
             return 2;
         }
     }

@@ -8,15 +8,6 @@
 
 namespace dsm::detail {
 
-// Levels 1 .. tileLevel-1 of one tile, finest first, each row-major.
-struct DepthHierarchy::TilePyramid {
-    struct Level {
-        std::uint32_t width = 0, height = 0;
-        std::vector<DepthRange> ranges;
-    };
-    std::vector<Level> levels;  // levels[g - 1]
-};
-
 namespace {
 
 int ceilLog2(std::uint32_t n) { return n <= 1 ? 0 : std::bit_width(n - 1); }
@@ -101,15 +92,10 @@ const DepthHierarchy::TilePyramid& DepthHierarchy::tilePyramid(std::uint32_t tx,
 }
 
 DepthRange DepthHierarchy::node(int g, std::uint32_t x, std::uint32_t y) const {
-    if (g >= tileLevel_) {
-        const GridLevel& level = gridLevels_[static_cast<std::size_t>(g - tileLevel_)];
-        return level.ranges[std::size_t(y) * level.width + x];
-    }
+    if (g >= tileLevel_) return gridNode(g, x, y);
     const int shift = tileLevel_ - g;
     const std::uint32_t tx = x >> shift, ty = y >> shift;
-    const TilePyramid& p = tilePyramid(tx, ty);
-    const auto& level = p.levels[static_cast<std::size_t>(g - 1)];
-    return level.ranges[std::size_t(y - (ty << shift)) * level.width + (x - (tx << shift))];
+    return tilePyramid(tx, ty).at(g, x - (tx << shift), y - (ty << shift));
 }
 
 float DepthHierarchy::minDepth(double x0, double y0, double x1, double y1) const {
@@ -120,11 +106,22 @@ float DepthHierarchy::minDepth(double x0, double y0, double x1, double y1) const
         return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
     };
     const PixelRect rect{pixel(x0, width_), pixel(y0, height_), pixel(x1, width_), pixel(y1, height_)};
-    lowerMin(topLevel_, 0, 0, rect, best);
+    // The tiles the rectangle's edge crosses are looked into last, nearest
+    // first, and only while they can still lower the bound: the tile
+    // directory settles the rest, and a tile never reached is never decoded.
+    // The bound is the same in any order (the smallest over one cover).
+    std::vector<EdgeTile> edge;
+    lowerMin(topLevel_, 0, 0, rect, best, &edge);
+    std::sort(edge.begin(), edge.end(), [](const EdgeTile& a, const EdgeTile& b) { return a.min < b.min; });
+    for (const EdgeTile& t : edge) {
+        if (!(t.min < best)) break;
+        lowerMin(tileLevel_, t.x, t.y, rect, best, nullptr);
+    }
     return best;
 }
 
-void DepthHierarchy::lowerMin(int g, std::uint32_t x, std::uint32_t y, const PixelRect& rect, float& best) const {
+void DepthHierarchy::lowerMin(int g, std::uint32_t x, std::uint32_t y, const PixelRect& rect, float& best,
+                              std::vector<EdgeTile>* edge) const {
     const std::uint64_t nx0 = std::uint64_t(x) << g, ny0 = std::uint64_t(y) << g;
     const std::uint64_t nx1 = nx0 + (std::uint64_t(1) << g) - 1, ny1 = ny0 + (std::uint64_t(1) << g) - 1;
     if (nx0 > rect.x1 || ny0 > rect.y1 || nx1 < rect.x0 || ny1 < rect.y0) return;
@@ -135,11 +132,15 @@ void DepthHierarchy::lowerMin(int g, std::uint32_t x, std::uint32_t y, const Pix
         best = r.min;
         return;
     }
+    if (edge && g == tileLevel_) {
+        edge->push_back({r.min, x, y});
+        return;
+    }
     for (std::uint32_t j = 0; j < 2; ++j)
         for (std::uint32_t i = 0; i < 2; ++i) {
             const std::uint32_t cx = 2 * x + i, cy = 2 * y + j;
             if ((std::uint64_t(cx) << (g - 1)) >= width_ || (std::uint64_t(cy) << (g - 1)) >= height_) continue;
-            lowerMin(g - 1, cx, cy, rect, best);
+            lowerMin(g - 1, cx, cy, rect, best, edge);
         }
 }
 

@@ -7,7 +7,7 @@
 //  - g >= tileLevel: a pyramid over the tile grid, built at construction from
 //    the tile directory's minZ/maxZ;
 //  - 1 <= g < tileLevel: a mini-pyramid per tile, built the first time a ray
-//    descends into the tile and kept (published with an atomic pointer, so
+//    or minDepth() descends into the tile and kept (published with an atomic pointer, so
 //    any number of threads may ask at once; two threads may both build one
 //    and one copy is dropped, which costs time, never correctness);
 //  - g = 0: the pixel itself, which the caller reads anyway.
@@ -35,6 +35,21 @@ struct DepthRange {
 
 class DepthHierarchy {
 public:
+    /// Levels 1 .. tileLevel-1 of one tile, finest first, each row-major.
+    struct TilePyramid {
+        struct Level {
+            std::uint32_t width = 0, height = 0;
+            std::vector<DepthRange> ranges;
+        };
+        std::vector<Level> levels;  // levels[g - 1]
+        /// Node (g, x, y) of the tile, 1 <= g < tileLevel, x and y relative
+        /// to the tile's first node of that level.
+        DepthRange at(int g, std::uint32_t x, std::uint32_t y) const {
+            const Level& level = levels[static_cast<std::size_t>(g - 1)];
+            return level.ranges[std::size_t(y) * level.width + x];
+        }
+    };
+
     /// Reads the tile directory of `map` (kept alive by the caller).
     explicit DepthHierarchy(const DeepShadowMap& map);
     ~DepthHierarchy();
@@ -51,6 +66,14 @@ public:
     /// May read and decode a tile (through the map's cache); throws what the
     /// reader throws.
     DepthRange node(int g, std::uint32_t x, std::uint32_t y) const;
+    /// Range of node (g, x, y) for tileLevel() <= g <= topLevel(): reads no tile.
+    DepthRange gridNode(int g, std::uint32_t x, std::uint32_t y) const {
+        const GridLevel& level = gridLevels_[static_cast<std::size_t>(g - tileLevel_)];
+        return level.ranges[std::size_t(y) * level.width + x];
+    }
+    /// The levels below the tile grid of tile (tx, ty), built on first use
+    /// (as node()).
+    const TilePyramid& tilePyramid(std::uint32_t tx, std::uint32_t ty) const;
 
     /// A lower bound on the depths of the pixels meeting the raster rectangle
     /// [x0, x1] x [y0, y1] (clamped to the map): the smallest node minimum over
@@ -65,12 +88,17 @@ public:
     std::size_t tilesBuilt() const { return built_.load(std::memory_order_relaxed); }
 
 private:
-    struct TilePyramid;
     struct PixelRect {
         std::uint32_t x0, y0, x1, y1;  // inclusive
     };
-    void lowerMin(int g, std::uint32_t x, std::uint32_t y, const PixelRect& rect, float& best) const;
-    const TilePyramid& tilePyramid(std::uint32_t tx, std::uint32_t ty) const;
+    struct EdgeTile {
+        float min;
+        std::uint32_t x, y;
+    };
+    // Lowers `best` by the nodes of (g, x, y) meeting `rect`; with `edge`,
+    // tiles the rectangle's edge crosses are left in it instead of opened.
+    void lowerMin(int g, std::uint32_t x, std::uint32_t y, const PixelRect& rect, float& best,
+                  std::vector<EdgeTile>* edge) const;
 
     const DeepShadowMap& map_;
     std::uint32_t width_ = 0, height_ = 0, tileSize_ = 0, tilesX_ = 0, tilesY_ = 0;

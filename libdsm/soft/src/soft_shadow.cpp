@@ -122,6 +122,7 @@ struct SoftShadowContext::Impl {
     double bias = 0.0;  // of the current query
     double stopBelow = 0.0;
     std::size_t layers = 1;
+    bool umbraEarlyOut = true;
     SampleAttenuation attenuation = SampleAttenuation::Subtractive;
 
     const MapInfo& info() const { return shared->reader->info; }
@@ -143,7 +144,10 @@ struct SoftShadowContext::Impl {
         return tile->pixel(std::size_t(y % T) * tile->width + x % T);
     }
 
-    bool stopped() const { return std::max({vis[0], vis[1], vis[2]}) < stopBelow; }
+    bool stopped() const {
+        const double most = std::max({vis[0], vis[1], vis[2]});
+        return most < stopBelow || (umbraEarlyOut && most <= 0.0);  // nothing left to lose
+    }
 
     // Xie §5.2 at one pixel: the ray's depth range across it, [z(ua), z(ub)],
     // widened by the z threshold, against the estimated samples of layers < K.
@@ -163,6 +167,15 @@ struct SoftShadowContext::Impl {
             const std::size_t begin = f.layerBegin(layer), end = f.layerEnd(layer);
             if (begin == end || f.z(end - 1) < lo) continue;
             if (f.z(begin) > hi) break;  // layers lie in depth order
+            if (umbraEarlyOut && f.z(begin) >= lo && f.z(begin) > consumed && f.z(end - 1) <= hi &&
+                opaqueAt(f, end - 1)) {
+                // Every sample of a layer that ends opaque: whatever the
+                // attenuation rule, the drops add up to all the light.
+                vis[0] = vis[1] = vis[2] = 0.0;
+                ++stats.raysProvenOpaque;
+                for (std::size_t i = begin; i < end; ++i) stats.samplesHit += counted ? f.count(i) : 1;
+                return;
+            }
             std::size_t i = static_cast<std::size_t>(
                 std::lower_bound(depths.begin() + static_cast<std::ptrdiff_t>(begin),
                                  depths.begin() + static_cast<std::ptrdiff_t>(end), lo,
@@ -191,6 +204,12 @@ struct SoftShadowContext::Impl {
             }
         }
         consumed = std::max(consumed, deepestHit);
+    }
+
+    static bool opaqueAt(const VisibilityView& f, std::size_t i) {
+        for (int c = 0; c < f.channels(); ++c)
+            if (f.value(i, c) > 0.0f) return false;
+        return true;
     }
 
     // A monochrome pixel's one value applies to each of the ray's channels:
@@ -244,79 +263,150 @@ struct SoftShadowContext::Impl {
     }
 
     // Xie §4.3 / §5.2: descend only into nodes whose depth range the ray's
-    // depth range meets, children in the order the ray enters them.
-    void walkNode(int g, std::uint32_t nx, std::uint32_t ny, double ua, double ub) {
-        if (g == 0) {
-            intersectPixel(nx, ny, ua, ub);
-            return;
-        }
-        ++stats.nodesVisited;
-        const DepthRange range = shared->hierarchy->node(g, nx, ny);
-        if (range.empty()) return;
-        double za = ray.z(ua), zb = ray.z(ub);
-        if (za > zb) std::swap(za, zb);
-        if (zb < range.min - zThreshold || za > range.max + zThreshold) return;
-        struct Child {
-            double ua, ub;
-            std::uint32_t x, y;
-        } children[4];
-        int n = 0;
-        const double size = static_cast<double>(std::uint64_t{1} << (g - 1));  // exact, no libm call per node
-        const double W = info().width, H = info().height;
-        for (std::uint32_t j = 0; j < 2; ++j)
-            for (std::uint32_t i = 0; i < 2; ++i) {
-                const std::uint32_t cx = 2 * nx + i, cy = 2 * ny + j;
-                const double x0 = cx * size, y0 = cy * size;
-                if (x0 >= W || y0 >= H) continue;
-                double a = ua, b = ub;
-                if (!clip(ray, x0, y0, std::min(x0 + size, W), std::min(y0 + size, H), a, b)) continue;
-                Child c{a, b, cx, cy};
-                int k = n++;
-                for (; k > 0 && children[k - 1].ua > c.ua; --k) children[k] = children[k - 1];
-                children[k] = c;
-            }
-        for (int k = 0; k < n; ++k) {
-            walkNode(g - 1, children[k].x, children[k].y, children[k].ua, children[k].ub);
-            if (stopped()) return;
-        }
-    }
-
-    // Starts the descent at the level where the ray's raster box spans at
-    // most 2 x 2 nodes (Curtis §3.5), not at the root: a ray shortened by the
-    // classification covers only a few pixels.
+    // depth range meets, children in the order the ray enters them, starting
+    // at the level g where the ray's raster box spans at most 2 x 2 nodes
+    // (Curtis §3.5), not at the root: a ray shortened by the classification
+    // covers only a few pixels. In single precision, relative to the corner
+    // of those 2 x 2 nodes and to u = ua: per node two products give the
+    // inverse depths at the ends of its stretch of the ray and two more the
+    // children's stretches, where the ray crosses the node's middle column
+    // and row (no division, no libm call). Each stretch is widened by a few
+    // ulps, so rounding can add a pixel but never lose one; each pixel
+    // reached is clipped again in double, so the pixels the ray crosses get
+    // the same stretch as in walkPixels.
     void walkHierarchy(double ua, double ub) {
+        const detail::DepthHierarchy& hierarchy = *shared->hierarchy;
         const MapInfo& m = info();
         const double ax = ray.r0x + ua * ray.drx, bx = ray.r0x + ub * ray.drx;
         const double ay = ray.r0y + ua * ray.dry, by = ray.r0y + ub * ray.dry;
         const auto pixel = [](double v, std::uint32_t n) {
             return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
         };
-        const std::uint32_t x0 = pixel(std::min(ax, bx), m.width), x1 = pixel(std::max(ax, bx), m.width);
-        const std::uint32_t y0 = pixel(std::min(ay, by), m.height), y1 = pixel(std::max(ay, by), m.height);
-        const int top = shared->hierarchy->topLevel();
-        const int g = std::min(static_cast<int>(std::bit_width(std::max(x1 - x0, y1 - y0))), top);
-        if (g == 0) {
-            intersectPixel(x0, y0, ua, ub);
+        const std::uint32_t px0 = pixel(std::min(ax, bx), m.width), px1 = pixel(std::max(ax, bx), m.width);
+        const std::uint32_t py0 = pixel(std::min(ay, by), m.height), py1 = pixel(std::max(ay, by), m.height);
+        const int g0 = std::min(static_cast<int>(std::bit_width(std::max(px1 - px0, py1 - py0))), hierarchy.topLevel());
+        if (g0 == 0) {
+            intersectPixel(px0, py0, ua, ub);
             return;
         }
-        struct Start {
-            double ua, ub;
+        const int tileLevel = hierarchy.tileLevel();
+        // The frame: the corner of the 2 x 2 nodes of level g0 from (bx0, by0).
+        const std::uint32_t bx0 = px0 >> g0, by0 = py0 >> g0;
+        const double fx = static_cast<double>(std::uint64_t{bx0} << g0), fy = static_cast<double>(std::uint64_t{by0} << g0);
+        const auto ox = static_cast<float>(ax - fx), oy = static_cast<float>(ay - fy);
+        const auto dx = static_cast<float>(ray.drx), dy = static_cast<float>(ray.dry);
+        const auto length = static_cast<float>(ub - ua);
+        // Rounding bounds: positions in the frame are below 2^(g0+2), so a few
+        // ulps of that in raster units; inverse depths a few ulps of their
+        // largest term.
+        const float delta = 2e-6f * static_cast<float>(std::uint64_t{1} << g0);
+        const bool alongY = std::abs(dx) * length <= delta, alongX = std::abs(dy) * length <= delta;
+        const float invDx = alongY ? 0.0f : 1.0f / dx, invDy = alongX ? 0.0f : 1.0f / dy;
+        const float slackX = delta * std::abs(invDx) + 1e-6f * length, slackY = delta * std::abs(invDy) + 1e-6f * length;
+        // A ray (almost) parallel to an axis: its span across that axis.
+        const float xLow = std::min(ox, ox + dx * length) - delta, xHigh = std::max(ox, ox + dx * length) + delta;
+        const float yLow = std::min(oy, oy + dy * length) - delta, yHigh = std::max(oy, oy + dy * length) + delta;
+        const auto w0 = static_cast<float>(ray.invZ0 + ua * ray.dInvZ), dw = static_cast<float>(ray.dInvZ);
+        const float wError = 1e-6f * (std::abs(w0) + std::abs(dw) * length);
+        const auto W = static_cast<float>(static_cast<double>(m.width) - fx);
+        const auto H = static_cast<float>(static_cast<double>(m.height) - fy);
+        const auto zT = static_cast<float>(zThreshold);
+        const float inf = std::numeric_limits<float>::infinity();
+        // The column (row) the ray is in before it crosses a node's middle.
+        const int c0 = dx > 0.0f ? 0 : 1, r0 = dy > 0.0f ? 0 : 1;
+
+        struct Node {
+            float ta, tb;
             std::uint32_t x, y;
-        } starts[4];
-        int n = 0;
-        const double size = static_cast<double>(std::uint64_t{1} << g);
-        for (std::uint32_t y = y0 >> g; y <= y1 >> g; ++y)
-            for (std::uint32_t x = x0 >> g; x <= x1 >> g; ++x) {
-                double a = ua, b = ub;
-                if (!clip(ray, x * size, y * size, std::min((x + 1) * size, double(m.width)),
-                          std::min((y + 1) * size, double(m.height)), a, b))
-                    continue;
-                Start st{a, b, x, y};
-                int k = n++;
-                for (; k > 0 && starts[k - 1].ua > st.ua; --k) starts[k] = starts[k - 1];
-                starts[k] = st;
+            int g;
+        };
+        Node stack[4 * 66];
+        int top = 0;
+        // Pushes the children (x + i, y + j) of level g of a stretch
+        // [ta, tb], split at the middle (xm, ym) in the frame.
+        const auto split = [&](float ta, float tb, float xm, float ym, std::uint32_t x, std::uint32_t y, int g) {
+            float colA[2], colB[2], rowA[2], rowB[2];
+            float tx = -inf, ty = -inf;  // where the ray enters the second column (row)
+            if (alongY) {
+                colA[0] = colA[1] = ta;
+                colB[0] = xLow <= xm ? tb : -inf;
+                colB[1] = xHigh >= xm ? tb : -inf;
+            } else {
+                const float t = (xm - ox) * invDx;
+                colA[c0] = ta;
+                colB[c0] = std::min(tb, t + slackX);
+                colA[1 - c0] = tx = std::max(ta, t - slackX);
+                colB[1 - c0] = tb;
             }
-        for (int k = 0; k < n && !stopped(); ++k) walkNode(g, starts[k].x, starts[k].y, starts[k].ua, starts[k].ub);
+            if (alongX) {
+                rowA[0] = rowA[1] = ta;
+                rowB[0] = yLow <= ym ? tb : -inf;
+                rowB[1] = yHigh >= ym ? tb : -inf;
+            } else {
+                const float t = (ym - oy) * invDy;
+                rowA[r0] = ta;
+                rowB[r0] = std::min(tb, t + slackY);
+                rowA[1 - r0] = ty = std::max(ta, t - slackY);
+                rowB[1 - r0] = tb;
+            }
+            if (xm >= W) colB[1] = -inf;  // beyond the map's edge
+            if (ym >= H) rowB[1] = -inf;
+            const auto push = [&](int i, int j) {
+                const float a = std::max(colA[i], rowA[j]), b = std::min(colB[i], rowB[j]);
+                if (a <= b) stack[top++] = {a, b, x + static_cast<std::uint32_t>(i), y + static_cast<std::uint32_t>(j), g};
+            };
+            // Entered in the order: first column and row, then the crossing
+            // that comes first, then the other; pushed last-first.
+            push(1 - c0, 1 - r0);
+            if (tx <= ty) {
+                push(c0, 1 - r0);
+                push(1 - c0, r0);
+            } else {
+                push(1 - c0, r0);
+                push(c0, 1 - r0);
+            }
+            push(c0, r0);
+        };
+        const auto size = static_cast<float>(std::uint64_t{1} << g0);
+        split(0.0f, length, size, size, bx0, by0, g0);
+
+        const detail::DepthHierarchy::TilePyramid* tile = nullptr;  // the tile (tileX, tileY)
+        std::uint32_t tileX = ~0u, tileY = ~0u;
+        while (top > 0) {
+            const Node e = stack[--top];
+            if (e.g == 0) {
+                double a = ua, b = ub;
+                const double px = e.x, py = e.y;
+                if (clip(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b)) {
+                    intersectPixel(e.x, e.y, a, b);
+                    if (stopped()) return;
+                }
+                continue;
+            }
+            ++stats.nodesVisited;
+            DepthRange range;
+            if (e.g >= tileLevel) {
+                range = hierarchy.gridNode(e.g, e.x, e.y);
+            } else {
+                const int shift = tileLevel - e.g;
+                const std::uint32_t tx = e.x >> shift, ty = e.y >> shift;
+                if (tx != tileX || ty != tileY) {
+                    tile = &hierarchy.tilePyramid(tx, ty);
+                    tileX = tx;
+                    tileY = ty;
+                }
+                range = tile->at(e.g, e.x - (tx << shift), e.y - (ty << shift));
+            }
+            if (range.empty()) continue;
+            // The ray meets [min - zT, max + zT] where its depth 1/w does:
+            // 1/wMin >= lo and 1/wMax <= hi, w > 0.
+            const float wa = w0 + e.ta * dw, wb = w0 + e.tb * dw;
+            const float wMin = std::min(wa, wb) - wError, wMax = std::max(wa, wb) + wError;
+            if (wMin * (range.min - zT) > 1.0f + 1e-5f || wMax * (range.max + zT) < 1.0f - 1e-5f) continue;
+            const int cg = e.g - 1;
+            split(e.ta, e.tb, static_cast<float>(static_cast<double>(std::uint64_t{2 * e.x + 1} << cg) - fx),
+                  static_cast<float>(static_cast<double>(std::uint64_t{2 * e.y + 1} << cg) - fy), 2 * e.x, 2 * e.y, cg);
+        }
     }
 
     // Curtis §3.6: the smallest stored depth the light's rays to P can meet,
@@ -415,6 +505,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     if (!s.begin(receiverWorld, options, result, p, prx, pry)) return result;
     s.stopBelow = options.visibilityThreshold;
     s.attenuation = options.attenuation;
+    s.umbraEarlyOut = options.umbraEarlyOut;
     s.layers = static_cast<std::size_t>(std::min(options.layers.value_or(m.maxLayers), m.maxLayers));
     const double d = s.shared->light.planeDepth();
     const double zEnd = p[2] - s.bias;

@@ -78,6 +78,14 @@ struct SoftShadowOptions {
     /// either way (only fully lit points are classified, never umbrae, which
     /// transparent layers cannot prove).
     bool classification = true;
+    /// Stop a ray as soon as layers and counts prove it opaque: in a pixel
+    /// where its depth range covers a whole layer (every estimated sample,
+    /// none of them already counted) whose last vertex is 0 in every channel,
+    /// its visibility is 0 and the rest of its walk is skipped. Crossing that
+    /// layer's samples one by one ends at 0 too (or stops below
+    /// visibilityThreshold first), so the answer moves by less than
+    /// visibilityThreshold per ray, and not at all with a threshold of 0.
+    bool umbraEarlyOut = true;
     /// Xie's rule is the default; neither wins everywhere. Against the
     /// reference ray tracer (same light samples), Subtractive had the smaller
     /// mean error on opaque meshes (the pipes of examples/cloud-and-pipes.json)
@@ -111,13 +119,16 @@ struct SoftShadowStats {
     std::uint64_t nodesVisited = 0;   ///< quadtree nodes above pixels
     std::uint64_t pixelsVisited = 0;  ///< pixels whose functions were read
     std::uint64_t samplesHit = 0;     ///< estimated samples that attenuated a ray
+    std::uint64_t raysProvenOpaque = 0;  ///< rays stopped by the umbra early-out
 };
 
 /// A map and an area light, ready to be traced: holds the min/max depth
 /// quadtree. Its levels above the tiles come from the tile directory when the
 /// tracer is made; the levels inside a tile are built the first time a ray
-/// reaches the tile and kept for the tracer's life (about 2.7 KB per 32 x 32
-/// tile; there is no eviction). Thread-safe: share one between threads, and
+/// or the penumbra classification's search reaches the tile (so a query pays
+/// only for the tiles it touches; hierarchyTilesBuilt() counts them) and kept
+/// for the tracer's life (about 2.7 KB per 32 x 32 tile; there is no
+/// eviction). Thread-safe: share one between threads, and
 /// give each thread a SoftShadowContext.
 class DSM_API SoftShadowTracer {
 public:
