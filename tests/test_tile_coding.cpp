@@ -1,19 +1,23 @@
 // Format 1.1 tile coding: value steps chosen from the tolerance, the stated
 // bound holding for the values as stored, bit-exact round trips of coded
 // tiles (with and without value steps), 1.0 files still read, and the codec,
-// its level and the area light recorded in the header.
+// its level and the area light recorded in the header, and the decoder's
+// checks agreeing with VisibilityView::validate().
 #include <dsm/dsm.h>
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
 #include "map_fixtures.h"
 #include "oracle.h"
 #include "temp_dir.h"
+#include "tile_codec.h"
 
 namespace {
 
@@ -224,4 +228,71 @@ TEST(TileCoding, TheHeaderRecordsTheCodecLevelAndTheAreaLight) {
     o.formatMinor = 2;
     o.quantiseValues = false;
     EXPECT_THROW(dsm::test::writeMap(dir / "new.dsm", o, image), dsm::Error);
+}
+
+// The coded decoder checks each function while it decodes it; whatever it
+// lets through must be what VisibilityView::validate() accepts, and what it
+// rejects must be reported as validate() reports it.
+TEST(TileCoding, DecodingRejectsExactlyWhatValidationRejects) {
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    struct Case {
+        const char* name;
+        std::vector<std::vector<float>> layers;  // z, V pairs per layer
+        int channels = 1;
+    };
+    const std::vector<Case> cases = {
+        {"valid", {{1.0f, 0.5f, 2.0f, 0.25f}}},
+        {"valid layers", {{1.0f, 0.5f, 2.0f, 0.0f}, {2.0f, 0.75f, 3.0f, 0.5f}}},
+        {"negative zero depth", {{-0.0f, 0.5f, 1.0f, 0.25f}}},
+        {"decreasing depth", {{2.0f, 0.5f, 1.0f, 0.25f}}},
+        {"negative depth", {{-1.0f, 0.5f}}},
+        {"negative depth later", {{1.0f, 0.5f, -1.0f, 0.25f}}},
+        {"nan depth", {{1.0f, 0.5f, nan, 0.25f}}},
+        {"infinite depth", {{1.0f, 0.5f, inf, 0.25f}}},
+        {"increasing value", {{1.0f, 0.5f, 2.0f, 0.75f}}},
+        {"value above one", {{1.0f, 1.5f}}},
+        {"negative value", {{1.0f, -0.5f}}},
+        {"nan value", {{1.0f, nan}}},
+        {"empty layer", {{1.0f, 0.5f}, {}, {2.0f, 0.5f, 3.0f, 0.25f}}},
+        {"trailing empty layer", {{1.0f, 0.5f, 2.0f, 0.25f}, {}}},
+        {"rgb increasing", {{1.0f, 0.5f, 2.0f, 0.25f}}, 3},
+    };
+    for (const Case& c : cases) {
+        for (const double step : {0.0, 1.0 / 128}) {
+            VisibilityFunction f(c.channels);
+            for (std::size_t l = 0; l < c.layers.size(); ++l) {
+                if (l > 0) f.beginLayer();
+                for (std::size_t i = 0; i + 1 < c.layers[l].size(); i += 2) {
+                    float v[3] = {c.layers[l][i + 1], c.layers[l][i + 1], c.layers[l][i + 1]};
+                    if (c.channels == 3 && i > 0) v[1] = 1.0f;  // green rises
+                    f.append(c.layers[l][i], v);
+                }
+            }
+            const auto values = f.allValues();
+            if (step > 0.0 && std::any_of(values.begin(), values.end(), [](float v) { return !(v >= 0.0f && v < 2.0f); }))
+                continue;  // no multiple of a step the coding can hold
+            std::string validateError;
+            try {
+                f.validate();
+            } catch (const dsm::Error& e) {
+                validateError = e.what();
+            }
+            const dsm::format::TileLayout layout{c.channels, false, 3, true, step};
+            const std::vector<VisibilityFunction> pixels = {VisibilityFunction(c.channels), f};
+            const dsm::format::EncodedTile tile = dsm::format::encodeTile(pixels, layout, 0);
+            std::string decodeError;
+            try {
+                const dsm::format::DecodedTile decoded = dsm::format::decodeTile(
+                    tile.stored, tile.summary, 2, 1, layout, dsm::ReaderOptions{}, "tile", 0, 0);
+                EXPECT_TRUE(dsm::test::sameFunction(decoded.pixel(1), f, false)) << c.name << " step " << step;
+            } catch (const dsm::Error& e) {
+                decodeError = e.what();
+            }
+            if (validateError.empty())
+                EXPECT_EQ(decodeError, "") << c.name << " step " << step;
+            else
+                EXPECT_THAT(decodeError, testing::HasSubstr("tile: pixel 1,0: " + validateError))
+                    << c.name << " step " << step;
+        }
+    }
 }

@@ -280,7 +280,7 @@ void readLayerCounts(ReadLayers readLayers, std::vector<PixelRecord>& records, c
     for (std::size_t p = 0; p + 1 < records.size(); ++p) {
         const std::uint8_t layers = readLayers();
         const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
-        checkLayerCount(layers, n, p, shape, layout, fail);
+        if (layers != 1) checkLayerCount(layers, n, p, shape, layout, fail);  // 1 is always valid
         layerTotal += layers - 1u;
         valueTotal += std::uint64_t(n) * records[p].channels;
         records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
@@ -334,8 +334,76 @@ DecodedTile parsePlainTile(std::span<const std::uint8_t> raw, const TileSummary&
     return tile;
 }
 
+// What the coded decoder's own checks found while decoding, so that the
+// functions need no second pass: the depth range, the non-empty pixels, and
+// whether anything looked wrong (a depth not finite, negative or decreasing, a
+// value outside [0, 1] or increasing, a layer start out of order). Anything
+// wrong sends the tile through VisibilityView::validate(), which names the
+// fault (and accepts what these checks reject only conservatively, such as a
+// depth of -0).
+struct DecodeChecks {
+    bool suspect = false;
+    std::uint32_t minBits = UINT32_MAX;
+    std::uint32_t maxBits = 0;
+    std::uint32_t nonEmptyPixels = 0;
+};
+
+constexpr std::uint32_t kInfinityBits = 0x7F800000;  // bits(+inf): finite non-negative floats lie below it
+
+// Values of one layer run of `n` vertices of `c` channels: each the previous
+// key less a difference, from `one`. `Quantised`: keys are multiples of the
+// step; otherwise float32 bits.
+template <bool Quantised>
+void decodeValueRun(VarintReader& r, std::uint32_t n, std::uint32_t c, std::uint32_t one, float step, float*& out,
+                    bool& suspect) {
+    const auto toFloat = [step](std::uint32_t key) {
+        // A key of a quantised value is at most 2^24: converted as a signed
+        // 32-bit integer, which is one instruction.
+        if constexpr (Quantised) return static_cast<float>(static_cast<std::int32_t>(key)) * step;
+        else return std::bit_cast<float>(key);
+    };
+    if (c == 1) {
+        std::uint32_t key = one;
+        for (std::uint32_t i = 0; i < n; ++i) {
+            const std::uint32_t d = r.next();
+            suspect |= d > key;
+            key -= d;
+            *out++ = toFloat(key);
+        }
+        return;
+    }
+    std::uint32_t key[3] = {one, one, one};
+    for (std::uint32_t i = 0; i < n; ++i)
+        for (std::uint32_t k = 0; k < 3; ++k) {
+            const std::uint32_t d = r.next();
+            suspect |= d > key[k];
+            key[k] -= d;
+            *out++ = toFloat(key[k]);
+        }
+}
+
+template <bool Quantised>
+void decodeValues(VarintReader& r, const PixelRecord* records, std::size_t pixels, const std::uint32_t* layerStarts,
+                  float* v, std::uint32_t one, float step, bool& suspect) {
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const PixelRecord& a = records[p];
+        const std::uint32_t n = records[p + 1].vertexStart - a.vertexStart;
+        float* out = v + a.valueStart;
+        std::uint32_t begin = 0;
+        for (std::uint32_t l = a.layerStart; l <= records[p + 1].layerStart; ++l) {
+            // Layer starts out of order were flagged when read; clamped here so
+            // that the run stays within the pixel.
+            const std::uint32_t end =
+                l < records[p + 1].layerStart ? std::min(std::max(layerStarts[l], begin), n) : n;
+            decodeValueRun<Quantised>(r, end - begin, a.channels, one, step, out, suspect);
+            begin = end;
+        }
+    }
+}
+
 DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary& summary, const TileShape& shape,
-                           const TileLayout& layout, const ReaderOptions& limits, const Fail& fail) {
+                           const TileLayout& layout, const ReaderOptions& limits, const Fail& fail,
+                           DecodeChecks& checks) {
     const std::size_t pixels = shape.pixels;
     VarintReader r(raw.data(), raw.data() + raw.size());
     std::vector<PixelRecord> records(pixels + 1, PixelRecord{0, 0, 0, 1});
@@ -352,7 +420,8 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
         fail(concat("pixel table holds ", total, total > summary.vertexCount ? " or more" : "",
                     " vertices, the directory ", summary.vertexCount),
              ErrorCode::corrupt);
-    for (std::size_t p = 0; p < pixels; ++p) readPixelFlag(r.byte(), records[p], p, shape, layout, fail);
+    for (std::size_t p = 0; p < pixels; ++p)
+        if (const std::uint8_t flags = r.byte(); flags != 0) readPixelFlag(flags, records[p], p, shape, layout, fail);
     std::uint64_t layerTotal = 0, valueTotal = 0;
     readLayerCounts([&] { return r.byte(); }, records, shape, layout, fail, layerTotal, valueTotal);
     if (!r.ok()) fail("tile data is truncated in its pixel table", ErrorCode::corrupt);
@@ -368,44 +437,43 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
     std::copy(records.begin(), records.end(), tile.records());
     std::uint32_t* const layerStarts = tile.layerStarts();
     for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
         std::uint32_t start = 0;
-        for (std::uint32_t l = records[p].layerStart; l < records[p + 1].layerStart; ++l)
-            layerStarts[l] = start += r.next();
+        for (std::uint32_t l = records[p].layerStart; l < records[p + 1].layerStart; ++l) {
+            const std::uint32_t d = r.next();
+            checks.suspect |= d == 0 || d >= n - start;  // not strictly inside (start, n)
+            layerStarts[l] = start += d;
+        }
     }
     float* const z = tile.depths();
     std::uint32_t previousFirst = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
         if (a == b) continue;
+        ++checks.nonEmptyPixels;
         std::uint32_t bits = previousFirst + unzigzag(r.next());
         previousFirst = bits;
+        checks.minBits = std::min(checks.minBits, bits);
         z[a] = std::bit_cast<float>(bits);
-        for (std::uint32_t i = a + 1; i < b; ++i) z[i] = std::bit_cast<float>(bits += r.next());
-    }
-    float* const v = tile.values();
-    const double step = layout.valueStep;
-    const float stepFloat = static_cast<float>(step);  // a power of two: exact
-    const std::uint32_t one = step == 0.0 ? std::bit_cast<std::uint32_t>(1.0f) : static_cast<std::uint32_t>(1.0 / step);
-    const std::uint32_t* const starts = layerStarts;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const PixelRecord& a = records[p];
-        const std::uint32_t n = records[p + 1].vertexStart - a.vertexStart;
-        const std::uint32_t c = a.channels;
-        std::uint32_t key[3] = {one, one, one};
-        std::uint32_t layer = a.layerStart;
-        const std::uint32_t layerEnd = records[p + 1].layerStart;
-        float* out = v + a.valueStart;
-        for (std::uint32_t i = 0; i < n; ++i) {
-            if (layer < layerEnd && i == starts[layer]) {
-                key[0] = key[1] = key[2] = one;
-                ++layer;
-            }
-            for (std::uint32_t k = 0; k < c; ++k) {
-                key[k] -= r.next();
-                *out++ = step == 0.0 ? std::bit_cast<float>(key[k]) : static_cast<float>(key[k]) * stepFloat;
-            }
+        bool wrapped = false;
+        for (std::uint32_t i = a + 1; i < b; ++i) {
+            const std::uint32_t next = bits + r.next();
+            wrapped |= next < bits;
+            bits = next;
+            z[i] = std::bit_cast<float>(bits);
         }
+        // Non-decreasing bit patterns, the last below bits(+inf): every depth
+        // is finite, non-negative and no less than the one before.
+        checks.suspect |= wrapped || bits >= kInfinityBits;
+        checks.maxBits = std::max(checks.maxBits, bits);
     }
+    const double step = layout.valueStep;
+    if (step == 0.0)
+        decodeValues<false>(r, records.data(), pixels, layerStarts, tile.values(), std::bit_cast<std::uint32_t>(1.0f),
+                            0.0f, checks.suspect);
+    else  // a power of two: the float and the key of 1 are exact
+        decodeValues<true>(r, records.data(), pixels, layerStarts, tile.values(),
+                           static_cast<std::uint32_t>(1.0 / step), static_cast<float>(step), checks.suspect);
     if (layout.hasCounts) {
         std::uint32_t* const counts = tile.counts();
         for (std::uint32_t i = 0; i < summary.vertexCount; ++i) counts[i] = r.next();
@@ -414,6 +482,29 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
     if (!r.atEnd())
         fail(concat("tile holds ", r.remaining(), " bytes after what its pixel table describes"), ErrorCode::corrupt);
     return tile;
+}
+
+// Checks every function of a tile (VisibilityView::validate) and gathers
+// the depth range and the non-empty pixels.
+DecodeChecks checkFunctions(const DecodedTile& tile, const TileShape& shape, const Fail& fail) {
+    DecodeChecks checks;
+    float minZ = std::numeric_limits<float>::infinity(), maxZ = -std::numeric_limits<float>::infinity();
+    for (std::size_t p = 0; p < shape.pixels; ++p) {
+        const VisibilityView view = tile.pixel(p);
+        try {
+            view.validate();
+        } catch (const Error& e) {
+            fail(concat(shape.pixelAt(p), ": ", e.what()), ErrorCode::corrupt);
+        }
+        if (!view.empty()) {
+            ++checks.nonEmptyPixels;
+            minZ = std::min(minZ, view.z(0));
+            maxZ = std::max(maxZ, view.z(view.size() - 1));
+        }
+    }
+    checks.minBits = std::bit_cast<std::uint32_t>(minZ);
+    checks.maxBits = std::bit_cast<std::uint32_t>(maxZ);
+    return checks;
 }
 
 }  // namespace
@@ -432,45 +523,34 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     if (summary.rawBytes > limits.maxTileBytes)
         fail(concat("tile of ", summary.rawBytes, " bytes exceeds the reader's limit ", limits.maxTileBytes),
              ErrorCode::limit);
-    std::vector<std::uint8_t> inflated;
+    std::unique_ptr<std::uint8_t[]> inflated;  // not zeroed first: inflate writes all of it or fails
     std::span<const std::uint8_t> raw = stored;
     if (summary.storedBytes < summary.rawBytes) {
-        inflated.resize(summary.rawBytes);
+        inflated.reset(new std::uint8_t[summary.rawBytes]);
         uLongf size = summary.rawBytes;
-        const int rc = uncompress(inflated.data(), &size, stored.data(), static_cast<uLong>(stored.size()));
+        const int rc = uncompress(inflated.get(), &size, stored.data(), static_cast<uLong>(stored.size()));
         if (rc != Z_OK) fail(concat("zlib cannot inflate the tile (error ", rc, ")"), ErrorCode::corrupt);
         if (size != summary.rawBytes)
             fail(concat("tile inflates to ", size, " bytes, not ", summary.rawBytes), ErrorCode::corrupt);
-        raw = inflated;
+        raw = std::span<const std::uint8_t>(inflated.get(), summary.rawBytes);
     } else if (summary.storedBytes > summary.rawBytes) {
         fail(concat("stored size ", summary.storedBytes, " exceeds the raw size ", summary.rawBytes), ErrorCode::corrupt);
     }
 
     const TileShape shape{width, height, pixels,
                           [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); }};
-    DecodedTile tile = layout.coded ? parseCodedTile(raw, summary, shape, layout, limits, fail)
+    DecodeChecks checks;
+    DecodedTile tile = layout.coded ? parseCodedTile(raw, summary, shape, layout, limits, fail, checks)
                                     : parsePlainTile(raw, summary, shape, layout, limits, fail);
-    float minZ = std::numeric_limits<float>::infinity(), maxZ = -std::numeric_limits<float>::infinity();
-    std::uint32_t nonEmpty = 0;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const VisibilityView view = tile.pixel(p);
-        try {
-            view.validate();
-        } catch (const Error& e) {
-            fail(concat(shape.pixelAt(p), ": ", e.what()), ErrorCode::corrupt);
-        }
-        if (!view.empty()) {
-            ++nonEmpty;
-            minZ = std::min(minZ, view.z(0));
-            maxZ = std::max(maxZ, view.z(view.size() - 1));
-        }
-    }
+    if (!layout.coded || checks.suspect) checks = checkFunctions(tile, shape, fail);
+    const float minZ = std::bit_cast<float>(checks.minBits), maxZ = std::bit_cast<float>(checks.maxBits);
     if (minZ != summary.minZ || maxZ != summary.maxZ)
         fail(concat("depth range [", minZ, ", ", maxZ, "] differs from the directory's [", summary.minZ, ", ",
                     summary.maxZ, "]"),
              ErrorCode::corrupt);
-    if (nonEmpty != summary.nonEmptyPixels)
-        fail(concat(nonEmpty, " non-empty pixels, the directory says ", summary.nonEmptyPixels), ErrorCode::corrupt);
+    if (checks.nonEmptyPixels != summary.nonEmptyPixels)
+        fail(concat(checks.nonEmptyPixels, " non-empty pixels, the directory says ", summary.nonEmptyPixels),
+             ErrorCode::corrupt);
     return tile;
 }
 
