@@ -171,6 +171,10 @@ def read_varints(buf, pos, count):
     return out, pos
 
 
+def unzigzag(u):
+    return (u >> 1) ^ (-(u & 1) & 0xFFFFFFFF)
+
+
 def decode_plain(raw, pixels, h):
     table = ((pixels * 6) + 3) & ~3
     cumulative = np.frombuffer(raw, dtype="<u4", count=pixels, offset=0).astype(np.int64)
@@ -211,20 +215,31 @@ def decode_coded(raw, pixels, h, step):
     for p in range(pixels):
         deltas, pos = read_varints(raw, pos, layers[p] - 1)
         starts.append(np.cumsum(deltas, dtype=np.uint64).astype(np.uint32))
-    depths = []
-    previous_first = 0
+    ends = []  # (first, last) bit patterns of each pixel, None when empty
+    previous_first = previous_last = 0
     for p in range(pixels):
         k = int(n[p])
-        d, pos = read_varints(raw, pos, k)
-        if k:
-            u = int(d[0])
-            first = (previous_first + ((u >> 1) ^ (-(u & 1) & mask))) & mask
-            previous_first = first
-            d = d.astype(np.uint64)
-            d[0] = first
-            depths.append((np.cumsum(d) & mask).astype(np.uint32))
-        else:
+        if k == 0:
+            ends.append(None)
+            continue
+        d, pos = read_varints(raw, pos, 2 if k > 1 else 1)
+        first = (previous_first + unzigzag(int(d[0]))) & mask
+        last = (previous_last + unzigzag(int(d[1]))) & mask if k > 1 else first
+        ends.append((first, last))
+        previous_first, previous_last = first, last
+    depths = []
+    for p in range(pixels):
+        k = int(n[p])
+        if k == 0:
             depths.append(np.empty(0, np.uint32))
+            continue
+        first, last = ends[p]
+        steps, pos = read_varints(raw, pos, max(k - 2, 0))
+        z = np.empty(k, np.uint64)
+        z[0] = first
+        z[1 : k - 1] = first + np.cumsum(steps.astype(np.uint64))
+        z[k - 1] = last
+        depths.append((z & mask).astype(np.uint32))
     one = 0x3F800000 if step == 0.0 else int(round(1.0 / step))
     values = []
     for p in range(pixels):
