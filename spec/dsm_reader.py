@@ -3,7 +3,9 @@
 
 Standard library and NumPy only. It reads versions 1.0 and 1.1 (both tile
 layouts), checks every CRC and the layout rules it needs to read safely, and
-gives every pixel of every level as arrays.
+gives every pixel of every level as arrays. Maps whose tiles are zstd frames
+(header codec 1) also need the module zstandard (Debian: python3-zstandard) or
+zstd (python3-zstd); without either such a map is refused with a message.
 
     dsm_reader.py FILE...          print a canonical dump of every pixel
     dsm_reader.py --summary FILE   print the header and level table
@@ -23,6 +25,7 @@ import numpy as np
 
 MAGIC = b"\x89DSM\r\n\x1a\n"
 HAS_COUNTS, HAS_LAYERS, CODED_TILES = 1, 2, 4
+CODEC_ZLIB, CODEC_ZSTD = 0, 1
 PIXEL_RGB = 1
 
 
@@ -73,8 +76,11 @@ def read_header(data):
         raise FormatError("unknown required flags 0x%x" % h.required)
     if (h.required & CODED_TILES) and h.minor < 1:
         raise FormatError("coded tiles in a 1.0 file")
-    if h.codec != 0:
+    if h.codec not in (CODEC_ZLIB, CODEC_ZSTD):
         raise FormatError("unknown codec %d" % h.codec)
+    if h.codec == CODEC_ZSTD and zstd_decompress is None:
+        raise FormatError("the tiles are zstd frames: this reader needs the Python module zstandard "
+                          "(Debian: python3-zstandard) or zstd (python3-zstd)")
     if h.channels not in (1, 3) or h.max_layers < 1:
         raise FormatError("channels or layers")
     if bool(h.required & HAS_LAYERS) != (h.max_layers > 1):
@@ -137,14 +143,36 @@ def np_frexp(x):
     return float(m), int(e)
 
 
-def inflate(data, tile, where):
+def zstd_module():
+    """A function that decompresses one zstd frame, or None without a module for it."""
+    try:
+        import zstandard
+        return lambda frame, size: zstandard.ZstdDecompressor().decompress(frame, max_output_size=size)
+    except ImportError:
+        pass
+    try:
+        import zstd
+        return lambda frame, size: zstd.decompress(frame)
+    except ImportError:
+        return None
+
+
+zstd_decompress = zstd_module()
+
+
+def inflate(data, tile, where, codec=CODEC_ZLIB):
     offset, stored, raw, crc = tile[:4]
     part = section(data, offset, stored, crc, where)
     if stored == raw:
         return part
     if stored > raw:
         raise FormatError("%s: stored size above raw size" % where)
-    out = zlib.decompress(part)
+    try:
+        out = zstd_decompress(part, raw) if codec == CODEC_ZSTD else zlib.decompress(part)
+    except zlib.error:
+        raise
+    except Exception as e:  # the zstd modules' own errors
+        raise FormatError("%s: zstd cannot decompress the tile: %s" % (where, e))
     if len(out) != raw:
         raise FormatError("%s: inflates to %d bytes, not %d" % (where, len(out), raw))
     return out
@@ -282,7 +310,7 @@ def read_map(path):
             hh = min(ts, L.height - ty * ts)
             if tile[1] == 0:
                 continue  # empty: every pixel fully lit
-            raw = inflate(data, tile, "level %d tile %d,%d" % (l, tx, ty))
+            raw = inflate(data, tile, "level %d tile %d,%d" % (l, tx, ty), h.codec)
             if h.required & CODED_TILES:
                 decoded = decode_coded(raw, w * hh, h, L.value_step)
             else:

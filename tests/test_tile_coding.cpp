@@ -156,15 +156,21 @@ TEST(TileCoding, CodedTilesRoundTripBitForBit) {
     TempDir dir;
     const Image image = randomImage(11, 6, 5);
     for (bool quantise : {false, true}) {
-        for (int zlibLevel : {0, 6}) {
+        for (int zlibLevel : {0, 6, -1}) {  // -1: zstd
             WriterOptions o = smallMap(0.05);
             o.quantiseValues = quantise;
-            o.zlibLevel = zlibLevel;
+            o.zlibLevel = std::max(zlibLevel, 0);
+            if (zlibLevel < 0) {
+                o.codec = dsm::TileCodec::Zstd;
+                o.zstdLevel = 19;
+            }
             const auto path = dir / "coded.dsm";
             dsm::test::writeMap(path, o, image, 7);
             EXPECT_NO_THROW(dsm::validate(path.string()));
             const auto map = DeepShadowMap::open(path.string());
             EXPECT_TRUE(map->info().codedTiles);
+            EXPECT_EQ(map->info().codec, zlibLevel < 0 ? dsm::TileCodec::Zstd : dsm::TileCodec::Zlib);
+            EXPECT_EQ(map->info().codecLevel, zlibLevel < 0 ? 19 : zlibLevel);
             const double step = map->info().levels[0].valueStep;
             EXPECT_EQ(step, quantise ? dsm::valueStep(0.05) : 0.0);
             for (std::uint32_t y = 0; y < image.height; ++y)
@@ -220,7 +226,21 @@ TEST(TileCoding, TheHeaderRecordsTheCodecLevelAndTheAreaLight) {
     EXPECT_EQ(map->info().areaLightRadius, 0.25);
     EXPECT_EQ(map->info().areaLightPlaneDepth, 0.75);
 
-    o.formatMinor = 0;  // 1.0 has no place for them
+    o.codec = dsm::TileCodec::Zstd;
+    o.zstdLevel = 12;
+    dsm::test::writeMap(dir / "zstd.dsm", o, image);
+    const auto zstdMap = DeepShadowMap::open((dir / "zstd.dsm").string());
+    EXPECT_EQ(zstdMap->info().codec, dsm::TileCodec::Zstd);
+    EXPECT_EQ(zstdMap->info().codecLevel, 12);
+    EXPECT_NO_THROW(dsm::validate((dir / "zstd.dsm").string()));
+    o.zstdLevel = 23;
+    EXPECT_THROW(dsm::test::writeMap(dir / "bad.dsm", o, image), dsm::Error);
+    o.zstdLevel = 12;
+    o.formatMinor = 0;  // 1.0 knows zlib alone
+    EXPECT_THROW(dsm::test::writeMap(dir / "old.dsm", o, image), dsm::Error);
+    o.codec = dsm::TileCodec::Zlib;
+
+    // 1.0 has no place for the area light
     EXPECT_THROW(dsm::test::writeMap(dir / "old.dsm", o, image), dsm::Error);
     o.areaLightRadius = 0.0;
     o.quantiseValues = true;

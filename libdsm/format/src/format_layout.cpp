@@ -142,9 +142,12 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
         fail(concat("header size ", h.headerSize, " is below the ", kHeaderSize11, " of version 1.", h.versionMinor));
     if ((h.requiredFlags & kRequiredCodedTiles) && h.versionMinor < 1)
         fail(concat("coded tiles flag in a version 1.", h.versionMinor, " file"));
-    if (h.codec != kCodecZlib)
+    if (h.codec != kCodecZlib && h.codec != kCodecZstd)
         fail(concat("unknown tile codec ", int(h.codec)), ErrorCode::unsupported);
-    if (h.codecLevel > kMaxZlibLevel) fail(concat("zlib level ", int(h.codecLevel), " is not in [0, 9]"));
+    if (h.codec == kCodecZlib && h.codecLevel > kMaxZlibLevel)
+        fail(concat("zlib level ", int(h.codecLevel), " is not in [0, ", kMaxZlibLevel, "]"));
+    if (h.codec == kCodecZstd && h.codecLevel > kMaxZstdLevel)
+        fail(concat("zstd level ", int(h.codecLevel), " is not in [0, ", kMaxZstdLevel, "]"));
     if (!std::isfinite(h.areaLightRadius) || h.areaLightRadius < 0.0 || !std::isfinite(h.areaLightPlaneDepth) ||
         h.areaLightPlaneDepth < 0.0)
         fail(concat("area light radius ", h.areaLightRadius, " or plane depth ", h.areaLightPlaneDepth,

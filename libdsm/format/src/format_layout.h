@@ -36,7 +36,9 @@ inline constexpr std::uint32_t kKnownRequiredFlags = kRequiredHasCounts | kRequi
 
 // Tile codecs (header field `codec`, 1.1) and their level ranges.
 inline constexpr std::uint8_t kCodecZlib = 0;
+inline constexpr std::uint8_t kCodecZstd = 1;
 inline constexpr int kMaxZlibLevel = 9;
+inline constexpr int kMaxZstdLevel = 22;
 
 // The finest value step a level may record: 2^-24.
 inline constexpr int kFinestValueStepExponent = 24;

@@ -7,6 +7,7 @@
 #include <limits>
 
 #include <zlib.h>
+#include <zstd.h>
 
 #include "byte_io.h"
 #include "dsm/error.h"
@@ -191,7 +192,17 @@ VisibilityView DecodedTile::pixel(std::size_t p) const {
                           std::span<const std::uint32_t>(layerStarts_ + a.layerStart, b.layerStart - a.layerStart));
 }
 
-EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int zlibLevel) {
+// `raw` as one zstd frame at `level`; empty when zstd fails.
+std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int level) {
+    std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));
+    const std::size_t n = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), level);
+    if (ZSTD_isError(n)) return {};
+    out.resize(n);
+    return out;
+}
+
+EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int codecLevel) {
+    const int zlibLevel = layout.codec == TileCodec::Zlib ? codecLevel : 0;
     EncodedTile out;
     TileSummary& s = out.summary;
     std::uint64_t vertices = 0;
@@ -216,7 +227,11 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
     if (raw.size() > UINT32_MAX) throw Error(ErrorCode::limit, concat("tile of ", raw.size(), " bytes exceeds 4 GiB"));
     s.rawBytes = static_cast<std::uint32_t>(raw.size());
 
-    if (zlibLevel > 0 && layout.coded) {
+    if (layout.codec == TileCodec::Zstd && codecLevel > 0) {
+        std::vector<std::uint8_t> packed = zstdFrame(raw, codecLevel);
+        if (packed.empty()) throw Error(ErrorCode::internal, "zstd failed to compress a tile");
+        if (packed.size() < raw.size()) out.stored = std::move(packed);
+    } else if (zlibLevel > 0 && layout.coded) {
         std::vector<std::uint8_t> packed = deflateParts(raw, partEnds, zlibLevel);
         if (packed.empty()) throw Error(ErrorCode::internal, "zlib failed to compress a tile");
         if (packed.size() < raw.size()) out.stored = std::move(packed);
@@ -541,7 +556,15 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
              ErrorCode::limit);
     std::unique_ptr<std::uint8_t[]> inflated;  // not zeroed first: inflate writes all of it or fails
     std::span<const std::uint8_t> raw = stored;
-    if (summary.storedBytes < summary.rawBytes) {
+    if (summary.storedBytes < summary.rawBytes && layout.codec == TileCodec::Zstd) {
+        inflated.reset(new std::uint8_t[summary.rawBytes]);
+        const std::size_t size = ZSTD_decompress(inflated.get(), summary.rawBytes, stored.data(), stored.size());
+        if (ZSTD_isError(size))
+            fail(concat("zstd cannot decompress the tile (", ZSTD_getErrorName(size), ")"), ErrorCode::corrupt);
+        if (size != summary.rawBytes)
+            fail(concat("tile decompresses to ", size, " bytes, not ", summary.rawBytes), ErrorCode::corrupt);
+        raw = std::span<const std::uint8_t>(inflated.get(), summary.rawBytes);
+    } else if (summary.storedBytes < summary.rawBytes) {
         inflated.reset(new std::uint8_t[summary.rawBytes]);
         uLongf size = summary.rawBytes;
         const int rc = uncompress(inflated.get(), &size, stored.data(), static_cast<uLong>(stored.size()));

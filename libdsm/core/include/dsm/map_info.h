@@ -79,7 +79,10 @@ struct LevelInfo {
 
 /// The general-purpose compressor a file's tiles went through (spec
 /// dsm-format.md §3): zlib streams, RFC 1950.
-enum class TileCodec : std::uint8_t { Zlib = 0 };
+/// How compressed tiles are compressed (spec/dsm-format.md §3, codec): zlib
+/// (RFC 1950), or zstd frames (RFC 8878), larger by 3-6 % but several times
+/// faster to decompress.
+enum class TileCodec : std::uint8_t { Zlib = 0, Zstd = 1 };
 
 /// Everything a map's header and level table hold.
 struct MapInfo {
