@@ -202,6 +202,8 @@ std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int le
 }
 
 EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int codecLevel) {
+    if (layout.coded && !layout.predictedDepths)
+        throw Error(ErrorCode::internal, "coded tiles are written with predicted depths only");
     const int zlibLevel = layout.codec == TileCodec::Zlib ? codecLevel : 0;
     EncodedTile out;
     TileSummary& s = out.summary;
@@ -422,6 +424,73 @@ void decodeValues(VarintReader& r, const PixelRecord* records, std::size_t pixel
     }
 }
 
+// Depths are float32 bit patterns: non-decreasing ones below bits(+inf) are
+// finite, non-negative, non-decreasing depths.
+
+// A pixel's first and last depth, noted for the checks of the whole tile.
+void noteDepthEnds(std::uint32_t first, std::uint32_t last, DecodeChecks& checks) {
+    ++checks.nonEmptyPixels;
+    checks.suspect |= last < first || last >= kInfinityBits;
+    checks.minBits = std::min(checks.minBits, first);
+    checks.maxBits = std::max(checks.maxBits, last);
+}
+
+// The depths z[from + 1 .. to - 1], each a step up from the one before;
+// returns the last one's bits (z[from]'s when there are none).
+std::uint32_t decodeDepthSteps(VarintReader& r, float* z, std::uint32_t from, std::uint32_t to, bool& wrapped) {
+    std::uint32_t bits = std::bit_cast<std::uint32_t>(z[from]);
+    for (std::uint32_t i = from + 1; i < to; ++i) {
+        const std::uint32_t next = bits + r.next();
+        wrapped |= next < bits;
+        bits = next;
+        z[i] = std::bit_cast<float>(bits);
+    }
+    return bits;
+}
+
+// PREDICTED_DEPTHS (spec §7): the ends of every pixel, each from the previous
+// non-empty pixel's, then the steps between them.
+void decodePredictedDepths(VarintReader& r, const PixelRecord* records, std::size_t pixels, float* z,
+                           DecodeChecks& checks) {
+    std::uint32_t previousFirst = 0, previousLast = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (a == b) continue;
+        const std::uint32_t first = previousFirst + unzigzag(r.next());
+        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(r.next()) : first;
+        previousFirst = first;
+        previousLast = last;
+        noteDepthEnds(first, last, checks);
+        z[a] = std::bit_cast<float>(first);
+        z[b - 1] = std::bit_cast<float>(last);
+    }
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (b - a < 3) continue;
+        bool wrapped = false;
+        const std::uint32_t bits = decodeDepthSteps(r, z, a, b - 1, wrapped);
+        checks.suspect |= wrapped || bits > std::bit_cast<std::uint32_t>(z[b - 1]);
+    }
+}
+
+// The first 1.1 coding (files without PREDICTED_DEPTHS): pixel by pixel, the
+// first depth from the previous non-empty pixel's first, the rest as steps.
+void decodeDepthsByPixel(VarintReader& r, const PixelRecord* records, std::size_t pixels, float* z,
+                         DecodeChecks& checks) {
+    std::uint32_t previousFirst = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (a == b) continue;
+        const std::uint32_t first = previousFirst + unzigzag(r.next());
+        previousFirst = first;
+        z[a] = std::bit_cast<float>(first);
+        bool wrapped = false;
+        const std::uint32_t last = decodeDepthSteps(r, z, a, b, wrapped);
+        checks.suspect |= wrapped;
+        noteDepthEnds(first, last, checks);
+    }
+}
+
 DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary& summary, const TileShape& shape,
                            const TileLayout& layout, const ReaderOptions& limits, const Fail& fail,
                            DecodeChecks& checks) {
@@ -466,38 +535,8 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
             layerStarts[l] = start += d;
         }
     }
-    // Depths: the ends of every pixel, then the steps in between (spec §7).
-    // Non-decreasing bit patterns below bits(+inf) are finite, non-negative,
-    // non-decreasing depths.
-    float* const z = tile.depths();
-    std::uint32_t previousFirst = 0, previousLast = 0;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
-        if (a == b) continue;
-        ++checks.nonEmptyPixels;
-        const std::uint32_t first = previousFirst + unzigzag(r.next());
-        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(r.next()) : first;
-        previousFirst = first;
-        previousLast = last;
-        checks.suspect |= last < first || last >= kInfinityBits;
-        checks.minBits = std::min(checks.minBits, first);
-        checks.maxBits = std::max(checks.maxBits, last);
-        z[a] = std::bit_cast<float>(first);
-        z[b - 1] = std::bit_cast<float>(last);
-    }
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
-        if (b - a < 3) continue;
-        std::uint32_t bits = std::bit_cast<std::uint32_t>(z[a]);
-        bool wrapped = false;
-        for (std::uint32_t i = a + 1; i + 1 < b; ++i) {
-            const std::uint32_t next = bits + r.next();
-            wrapped |= next < bits;
-            bits = next;
-            z[i] = std::bit_cast<float>(bits);
-        }
-        checks.suspect |= wrapped || bits > std::bit_cast<std::uint32_t>(z[b - 1]);
-    }
+    if (layout.predictedDepths) decodePredictedDepths(r, records.data(), pixels, tile.depths(), checks);
+    else decodeDepthsByPixel(r, records.data(), pixels, tile.depths(), checks);
     const double step = layout.valueStep;
     if (step == 0.0)
         decodeValues<false>(r, records.data(), pixels, layerStarts, tile.values(), std::bit_cast<std::uint32_t>(1.0f),

@@ -76,6 +76,10 @@ struct TileLayout {
     double valueStep = 0.0;
     /// The compressor of tiles stored compressed.
     TileCodec codec = TileCodec::Zlib;
+    /// Coded tiles' depths: each pixel's ends predicted from the previous
+    /// pixel's (PREDICTED_DEPTHS, what the writer writes); false for the first
+    /// 1.1 coding, steps within each pixel, which is read only.
+    bool predictedDepths = true;
 };
 
 struct EncodedTile {

@@ -273,6 +273,7 @@ void MapWriter::finish() try {
     info.filterWidth = s.options.filterWidth;
     for (const Level& L : s.levels) info.levels.push_back(L.info);
     info.codedTiles = s.options.formatMinor >= 1;
+    info.predictedDepths = info.codedTiles;
     info.codec = s.options.codec;
     info.codecLevel = codecLevel(s.options);
     info.areaLightRadius = s.options.areaLightRadius;

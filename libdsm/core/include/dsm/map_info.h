@@ -105,6 +105,10 @@ struct MapInfo {
     /// Tiles use the 1.1 coding (depth deltas, quantised values, variable
     /// length integers); false for the 1.0 layout of raw arrays.
     bool codedTiles = false;
+    /// Coded tiles predict each pixel's first and last depth from the
+    /// previous pixel's (PREDICTED_DEPTHS, every coded map written today);
+    /// false for maps of the first 1.1 coding (depth steps within each pixel).
+    bool predictedDepths = false;
     /// The tiles' compressor and the level the writer gave it (0 = tiles
     /// stored uncompressed); codecLevel is -1 when the file does not record
     /// it (format 1.0). A writer given the same level reproduces the tiles.
