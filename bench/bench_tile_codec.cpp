@@ -6,19 +6,31 @@
 //     over level 0 and the bytes per stored vertex at level 0;
 //   - decode throughput (CRC, inflate, parse, checks) over plain inflate of
 //     the same stored bytes (a ratio of times, best of several rounds);
-//   - a cold tile read + decode (from the file, no tile cache) in us per tile.
+//   - the same raw tile bytes compressed with zstd at a few levels: size and
+//     decompression time against zlib's inflate (same run);
+//   - a cold read + decode per level-0 tile: the file's pages dropped from the
+//     page cache (posix_fadvise DONTNEED) before each tile, which is then read
+//     and decoded through a map without a tile cache; and the same warm.
 //
-//   bench_tile_codec [--smoke] MAP...     (--smoke: a small generated map)
+//   bench_tile_codec [--smoke] [--decode-only] [--rounds=N] MAP...
+//     --smoke: a small generated map; --decode-only: the decode and inflate
+//     timings alone (with --rounds=1, for a profiler such as callgrind);
+//     --rounds: timing rounds (5; the decode ratio takes twice as many)
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
+#include <cstdlib>
 #include <fstream>
 #include <iterator>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
+#include <fcntl.h>
+#include <unistd.h>
 #include <zlib.h>
+#include <zstd.h>
 
 #include "dsm/dsm.h"
 #include "tile_codec.h"
@@ -50,7 +62,96 @@ double bestSeconds(int rounds, F&& run) {
     return best;
 }
 
-void measure(const std::string& path, int rounds) {
+// The tile's bytes after decompression.
+std::vector<std::uint8_t> rawBytes(const StoredTile& t) {
+    if (t.summary.storedBytes == t.summary.rawBytes) return t.bytes;
+    std::vector<std::uint8_t> raw(t.summary.rawBytes);
+    uLongf size = t.summary.rawBytes;
+    if (uncompress(raw.data(), &size, t.bytes.data(), static_cast<uLong>(t.bytes.size())) != Z_OK || size != raw.size())
+        throw std::runtime_error("zlib cannot inflate a tile");
+    return raw;
+}
+
+// The raw bytes of every tile compressed with zstd at a few levels (kept
+// stored when zstd does not make them smaller, as the writer does with zlib):
+// total size against zlib's, and decompression time against inflate's.
+void measureZstd(const std::vector<StoredTile>& tiles, double inflateSeconds, int rounds) {
+    std::vector<std::vector<std::uint8_t>> raws;
+    std::uint64_t zlibTotal = 0, rawTotal = 0;
+    for (const StoredTile& t : tiles) {
+        raws.push_back(rawBytes(t));
+        zlibTotal += t.bytes.size();
+        rawTotal += raws.back().size();
+    }
+    std::printf("  zstd on the same raw tile bytes (%llu raw bytes; zlib as stored: %llu bytes, inflate %.2f ms):\n",
+                static_cast<unsigned long long>(rawTotal), static_cast<unsigned long long>(zlibTotal),
+                inflateSeconds * 1e3);
+    ZSTD_CCtx* cctx = ZSTD_createCCtx();
+    ZSTD_DCtx* dctx = ZSTD_createDCtx();
+    for (const int level : {1, 3, 9, 19}) {
+        std::vector<std::vector<std::uint8_t>> packed;
+        std::uint64_t total = 0;
+        for (const std::vector<std::uint8_t>& raw : raws) {
+            std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));
+            const std::size_t n = ZSTD_compressCCtx(cctx, out.data(), out.size(), raw.data(), raw.size(), level);
+            if (ZSTD_isError(n)) throw std::runtime_error(ZSTD_getErrorName(n));
+            out.resize(n);
+            total += std::min(n, raw.size());
+            packed.push_back(n < raw.size() ? std::move(out) : std::vector<std::uint8_t>());
+        }
+        std::vector<std::uint8_t> scratch;
+        const double seconds = bestSeconds(rounds, [&] {
+            for (std::size_t i = 0; i < raws.size(); ++i) {
+                if (packed[i].empty()) continue;  // stored: nothing to decompress
+                scratch.resize(raws[i].size());
+                const std::size_t n =
+                    ZSTD_decompressDCtx(dctx, scratch.data(), scratch.size(), packed[i].data(), packed[i].size());
+                if (n != raws[i].size()) throw std::runtime_error("zstd cannot decompress a tile");
+            }
+        });
+        std::printf("    zstd level %2d: %llu bytes (%.3f x zlib), decompression %.2f ms (%.2f x faster than inflate)\n",
+                    level, static_cast<unsigned long long>(total), zlibTotal ? double(total) / double(zlibTotal) : 0.0,
+                    seconds * 1e3, seconds > 0.0 ? inflateSeconds / seconds : 0.0);
+    }
+    ZSTD_freeDCtx(dctx);
+    ZSTD_freeCCtx(cctx);
+}
+
+// Microseconds to read and decode one level-0 tile through a map without a
+// tile cache, each tile once; with `cold`, the file's pages are dropped from
+// the page cache before each tile (not timed), so every read reaches the disk.
+std::vector<double> tileReadMicroseconds(const std::string& path, const std::vector<StoredTile>& tiles, bool cold) {
+    dsm::ReaderOptions options;
+    options.cache = dsm::TileCache::create(0);
+    const auto map = dsm::DeepShadowMap::open(path, options);
+    const int fd = ::open(path.c_str(), O_RDONLY);
+    if (fd < 0) throw std::runtime_error("cannot open " + path);
+    std::vector<double> times;
+    for (const StoredTile& t : tiles) {
+        if (t.level != 0) continue;
+        if (cold) posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+        const auto start = Clock::now();
+        const dsm::PixelFunction f = map->pixel(0, t.originX, t.originY);
+        times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - start).count());
+    }
+    ::close(fd);
+    return times;
+}
+
+void measureColdReads(const std::string& path, const std::vector<StoredTile>& tiles) {
+    const auto report = [](const char* what, std::vector<double> times) {
+        if (times.empty()) return;
+        double sum = 0.0;
+        for (double t : times) sum += t;
+        std::sort(times.begin(), times.end());
+        std::printf("  %s tile read + decode, per level-0 tile (%zu tiles): mean %.1f us, median %.1f us\n", what,
+                    times.size(), sum / double(times.size()), times[times.size() / 2]);
+    };
+    report("cold (page cache dropped before each tile)", tileReadMicroseconds(path, tiles, true));
+    report("warm (file in the page cache)", tileReadMicroseconds(path, tiles, false));
+}
+
+void measure(const std::string& path, int rounds, bool decodeOnly) {
     const auto map = dsm::DeepShadowMap::open(path);
     const dsm::MapInfo& info = map->info();
     const std::vector<std::uint8_t> file = readAll(path);
@@ -75,9 +176,10 @@ void measure(const std::string& path, int rounds) {
 
     // Sizes: as stored, and the same pixels as 1.0 tiles at the map's zlib level.
     const int zlibLevel = info.codecLevel >= 0 ? info.codecLevel : 6;
-    std::vector<std::uint64_t> oldBytes(info.levels.size(), 0);
+    std::vector<std::uint64_t> oldBytes(info.levels.size(), 0), recodedBytes(info.levels.size(), 0);
     std::vector<dsm::format::EncodedTile> oldTiles;
     for (const StoredTile& t : tiles) {
+        if (decodeOnly) break;
         std::vector<dsm::VisibilityFunction> pixels;
         for (std::uint32_t y = 0; y < t.height; ++y)
             for (std::uint32_t x = 0; x < t.width; ++x)
@@ -85,20 +187,27 @@ void measure(const std::string& path, int rounds) {
         const dsm::format::TileLayout plain{info.channels, info.hasCounts, info.maxLayers, false, 0.0};
         oldTiles.push_back(dsm::format::encodeTile(pixels, plain, zlibLevel));
         oldBytes[t.level] += oldTiles.back().stored.size();
+        const dsm::format::TileLayout coded{info.channels, info.hasCounts, info.maxLayers, true,
+                                            info.levels[t.level].valueStep};
+        recodedBytes[t.level] += dsm::format::encodeTile(pixels, coded, zlibLevel).stored.size();
     }
-    std::uint64_t total = 0, oldTotal = 0;
+    std::uint64_t total = 0, oldTotal = 0, recodedTotal = 0;
     std::printf("%s: format %d.%d, %s tiles, zlib level %d\n", path.c_str(), info.versionMajor, info.versionMinor,
                 info.codedTiles ? "coded" : "1.0", zlibLevel);
-    std::printf("  level  tolerance  value step  vertices     bytes     1.0 bytes  ratio\n");
+    std::printf("  level  tolerance  value step  vertices     bytes     1.0 bytes  ratio  this build's coding\n");
     for (unsigned l = 0; l < info.levels.size(); ++l) {
         const dsm::LevelInfo& L = info.levels[l];
         total += L.storedBytes;
         oldTotal += oldBytes[l];
-        std::printf("  %5u  %9.4g  %10.4g  %9llu  %10llu  %10llu  %5.3f\n", l, L.tolerance, L.valueStep,
+        recodedTotal += recodedBytes[l];
+        std::printf("  %5u  %9.4g  %10.4g  %9llu  %10llu  %10llu  %5.3f  %10llu\n", l, L.tolerance, L.valueStep,
                     static_cast<unsigned long long>(L.vertexCount), static_cast<unsigned long long>(L.storedBytes),
                     static_cast<unsigned long long>(oldBytes[l]),
-                    oldBytes[l] ? double(L.storedBytes) / double(oldBytes[l]) : 0.0);
+                    oldBytes[l] ? double(L.storedBytes) / double(oldBytes[l]) : 0.0,
+                    static_cast<unsigned long long>(recodedBytes[l]));
     }
+    std::printf("  all levels re-encoded by this build's tile coding at zlib level %d: %llu bytes\n", zlibLevel,
+                static_cast<unsigned long long>(recodedTotal));
     const dsm::LevelInfo& base = info.levels[0];
     std::printf("  all levels: %llu bytes (1.0 tiles: %llu, ratio %.3f); file %llu bytes\n",
                 static_cast<unsigned long long>(total), static_cast<unsigned long long>(oldTotal),
@@ -108,22 +217,20 @@ void measure(const std::string& path, int rounds) {
                 base.vertexCount ? double(base.storedBytes) / double(base.vertexCount) : 0.0,
                 base.vertexCount ? double(oldBytes[0]) / double(base.vertexCount) : 0.0);
 
-    // Decode against plain inflate of the same stored bytes.
+    // Decode against plain inflate of the same stored bytes, the two timed
+    // in turn in each round (so that both see the same load), best of each.
     std::vector<std::uint8_t> scratch;
-    std::uint64_t inflatedBytes = 0;
-    const double inflateSeconds = bestSeconds(rounds, [&] {
-        inflatedBytes = 0;
+    const dsm::ReaderOptions limits;
+    std::size_t decodedVertices = 0;
+    const auto inflateAll = [&] {
         for (const StoredTile& t : tiles) {
             if (t.summary.storedBytes == t.summary.rawBytes) continue;  // stored: nothing to inflate
             scratch.resize(t.summary.rawBytes);
             uLongf size = t.summary.rawBytes;
             uncompress(scratch.data(), &size, t.bytes.data(), static_cast<uLong>(t.bytes.size()));
-            inflatedBytes += size;
         }
-    });
-    const dsm::ReaderOptions limits;
-    std::size_t decodedVertices = 0;
-    const double decodeSeconds = bestSeconds(rounds, [&] {
+    };
+    const auto decodeAll = [&] {
         decodedVertices = 0;
         for (const StoredTile& t : tiles) {
             const dsm::format::DecodedTile d = dsm::format::decodeTile(
@@ -132,12 +239,18 @@ void measure(const std::string& path, int rounds) {
                 limits, "bench", t.originX, t.originY);
             decodedVertices += d.records()[d.pixelCount()].vertexStart;
         }
-    });
+    };
+    double inflateSeconds = 1e30, decodeSeconds = 1e30;
+    for (int r = 0; r < 2 * rounds; ++r) {
+        inflateSeconds = std::min(inflateSeconds, bestSeconds(1, inflateAll));
+        decodeSeconds = std::min(decodeSeconds, bestSeconds(1, decodeAll));
+    }
     std::printf("  decode of %zu tiles (%llu vertices): %.2f ms; zlib inflate alone of the same bytes: %.2f ms; "
                 "decode throughput / inflate throughput = %.3f\n",
                 tiles.size(), static_cast<unsigned long long>(decodedVertices), decodeSeconds * 1e3,
                 inflateSeconds * 1e3, decodeSeconds > 0.0 ? inflateSeconds / decodeSeconds : 0.0);
 
+    if (decodeOnly) return;
     const double oldDecodeSeconds = bestSeconds(rounds, [&] {
         for (std::size_t i = 0; i < tiles.size(); ++i) {
             const StoredTile& t = tiles[i];
@@ -149,10 +262,8 @@ void measure(const std::string& path, int rounds) {
     std::printf("  decode of the same pixels as 1.0 tiles: %.2f ms (coded / 1.0 decode time %.3f)\n",
                 oldDecodeSeconds * 1e3, oldDecodeSeconds > 0.0 ? decodeSeconds / oldDecodeSeconds : 0.0);
 
-    // Cold read + decode: every tile from the file, through no cache.
-    const double validateSeconds = bestSeconds(rounds, [&] { dsm::validate(path); });
-    std::printf("  cold tile read + decode (validate(), no cache): %.1f us per tile (%zu non-empty tiles)\n",
-                tiles.empty() ? 0.0 : validateSeconds * 1e6 / double(tiles.size()), tiles.size());
+    measureZstd(tiles, inflateSeconds, rounds);
+    measureColdReads(path, tiles);
 }
 
 std::string smokeMap() {
@@ -185,19 +296,22 @@ std::string smokeMap() {
 
 int main(int argc, char** argv) {
     std::vector<std::string> maps;
-    bool smoke = false;
+    bool smoke = false, decodeOnly = false;
+    int rounds = 5;
     for (int i = 1; i < argc; ++i) {
         const std::string arg = argv[i];
         if (arg == "--smoke") smoke = true;
+        else if (arg == "--decode-only") decodeOnly = true;
+        else if (arg.rfind("--rounds=", 0) == 0) rounds = std::max(1, std::atoi(arg.c_str() + 9));
         else maps.push_back(arg);
     }
     try {
         if (smoke) maps = {smokeMap()};
         if (maps.empty()) {
-            std::fprintf(stderr, "usage: bench_tile_codec [--smoke] MAP...\n");
+            std::fprintf(stderr, "usage: bench_tile_codec [--smoke] [--decode-only] [--rounds=N] MAP...\n");
             return 2;
         }
-        for (const std::string& path : maps) measure(path, smoke ? 1 : 5);
+        for (const std::string& path : maps) measure(path, smoke ? 1 : rounds, decodeOnly);
     } catch (const std::exception& e) {
         std::fprintf(stderr, "bench_tile_codec: ERROR: %s\n", e.what());
         return 1;

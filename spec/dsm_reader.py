@@ -3,7 +3,9 @@
 
 Standard library and NumPy only. It reads versions 1.0 and 1.1 (both tile
 layouts), checks every CRC and the layout rules it needs to read safely, and
-gives every pixel of every level as arrays.
+gives every pixel of every level as arrays. Maps whose tiles are zstd frames
+(header codec 1) also need the module zstandard (Debian: python3-zstandard) or
+zstd (python3-zstd); without either such a map is refused with a message.
 
     dsm_reader.py FILE...          print a canonical dump of every pixel
     dsm_reader.py --summary FILE   print the header and level table
@@ -22,7 +24,8 @@ import zlib
 import numpy as np
 
 MAGIC = b"\x89DSM\r\n\x1a\n"
-HAS_COUNTS, HAS_LAYERS, CODED_TILES = 1, 2, 4
+HAS_COUNTS, HAS_LAYERS, CODED_TILES, PREDICTED_DEPTHS = 1, 2, 4, 8
+CODEC_ZLIB, CODEC_ZSTD = 0, 1
 PIXEL_RGB = 1
 
 
@@ -69,12 +72,17 @@ def read_header(data):
         h.area_light_radius, h.area_light_plane_depth = struct.unpack_from("<2d", data, 280)
     if h.file_size != len(data):
         raise FormatError("file size %d, header says %d" % (len(data), h.file_size))
-    if h.required & ~(HAS_COUNTS | HAS_LAYERS | CODED_TILES):
+    if h.required & ~(HAS_COUNTS | HAS_LAYERS | CODED_TILES | PREDICTED_DEPTHS):
         raise FormatError("unknown required flags 0x%x" % h.required)
     if (h.required & CODED_TILES) and h.minor < 1:
         raise FormatError("coded tiles in a 1.0 file")
-    if h.codec != 0:
+    if (h.required & PREDICTED_DEPTHS) and not (h.required & CODED_TILES):
+        raise FormatError("predicted depths without coded tiles")
+    if h.codec not in (CODEC_ZLIB, CODEC_ZSTD):
         raise FormatError("unknown codec %d" % h.codec)
+    if h.codec == CODEC_ZSTD and zstd_decompress is None:
+        raise FormatError("the tiles are zstd frames: this reader needs the Python module zstandard "
+                          "(Debian: python3-zstandard) or zstd (python3-zstd)")
     if h.channels not in (1, 3) or h.max_layers < 1:
         raise FormatError("channels or layers")
     if bool(h.required & HAS_LAYERS) != (h.max_layers > 1):
@@ -137,14 +145,36 @@ def np_frexp(x):
     return float(m), int(e)
 
 
-def inflate(data, tile, where):
+def zstd_module():
+    """A function that decompresses one zstd frame, or None without a module for it."""
+    try:
+        import zstandard
+        return lambda frame, size: zstandard.ZstdDecompressor().decompress(frame, max_output_size=size)
+    except ImportError:
+        pass
+    try:
+        import zstd
+        return lambda frame, size: zstd.decompress(frame)
+    except ImportError:
+        return None
+
+
+zstd_decompress = zstd_module()
+
+
+def inflate(data, tile, where, codec=CODEC_ZLIB):
     offset, stored, raw, crc = tile[:4]
     part = section(data, offset, stored, crc, where)
     if stored == raw:
         return part
     if stored > raw:
         raise FormatError("%s: stored size above raw size" % where)
-    out = zlib.decompress(part)
+    try:
+        out = zstd_decompress(part, raw) if codec == CODEC_ZSTD else zlib.decompress(part)
+    except zlib.error:
+        raise
+    except Exception as e:  # the zstd modules' own errors
+        raise FormatError("%s: zstd cannot decompress the tile: %s" % (where, e))
     if len(out) != raw:
         raise FormatError("%s: inflates to %d bytes, not %d" % (where, len(out), raw))
     return out
@@ -169,6 +199,10 @@ def read_varints(buf, pos, count):
             shift += 7
         out[i] = value
     return out, pos
+
+
+def unzigzag(u):
+    return (u >> 1) ^ (-(u & 1) & 0xFFFFFFFF)
 
 
 def decode_plain(raw, pixels, h):
@@ -198,6 +232,56 @@ def decode_plain(raw, pixels, h):
     return out
 
 
+def depth_run(first, steps):
+    """Bit patterns: `first`, then each a step up from the one before."""
+    z = np.empty(len(steps) + 1, np.uint64)
+    z[0] = first
+    z[1:] = first + np.cumsum(steps.astype(np.uint64))
+    return (z & 0xFFFFFFFF).astype(np.uint32)
+
+
+def decode_predicted_depths(raw, pos, n):
+    """PREDICTED_DEPTHS: every pixel's ends, each from the previous non-empty
+    pixel's, then the steps between a pixel's ends."""
+    mask = 0xFFFFFFFF
+    ends = []  # (first, last) bit patterns of each pixel, None when empty
+    previous_first = previous_last = 0
+    for k in (int(k) for k in n):
+        if k == 0:
+            ends.append(None)
+            continue
+        d, pos = read_varints(raw, pos, 2 if k > 1 else 1)
+        first = (previous_first + unzigzag(int(d[0]))) & mask
+        last = (previous_last + unzigzag(int(d[1]))) & mask if k > 1 else first
+        ends.append((first, last))
+        previous_first, previous_last = first, last
+    depths = []
+    for k, e in zip((int(k) for k in n), ends):
+        if k == 0:
+            depths.append(np.empty(0, np.uint32))
+            continue
+        steps, pos = read_varints(raw, pos, max(k - 2, 0))
+        z = depth_run(e[0], steps)
+        depths.append(np.append(z, np.uint32(e[1])) if k > 1 else z)
+    return depths, pos
+
+
+def decode_depths_by_pixel(raw, pos, n):
+    """The first 1.1 coding (no PREDICTED_DEPTHS): pixel by pixel, the first
+    depth from the previous non-empty pixel's first, then the steps."""
+    depths = []
+    previous_first = 0
+    for k in (int(k) for k in n):
+        if k == 0:
+            depths.append(np.empty(0, np.uint32))
+            continue
+        d, pos = read_varints(raw, pos, k)
+        first = (previous_first + unzigzag(int(d[0]))) & 0xFFFFFFFF
+        previous_first = first
+        depths.append(depth_run(first, d[1:]))
+    return depths, pos
+
+
 def decode_coded(raw, pixels, h, step):
     mask = 0xFFFFFFFF
     n, pos = read_varints(raw, 0, pixels)
@@ -211,20 +295,10 @@ def decode_coded(raw, pixels, h, step):
     for p in range(pixels):
         deltas, pos = read_varints(raw, pos, layers[p] - 1)
         starts.append(np.cumsum(deltas, dtype=np.uint64).astype(np.uint32))
-    depths = []
-    previous_first = 0
-    for p in range(pixels):
-        k = int(n[p])
-        d, pos = read_varints(raw, pos, k)
-        if k:
-            u = int(d[0])
-            first = (previous_first + ((u >> 1) ^ (-(u & 1) & mask))) & mask
-            previous_first = first
-            d = d.astype(np.uint64)
-            d[0] = first
-            depths.append((np.cumsum(d) & mask).astype(np.uint32))
-        else:
-            depths.append(np.empty(0, np.uint32))
+    if h.required & PREDICTED_DEPTHS:
+        depths, pos = decode_predicted_depths(raw, pos, n)
+    else:
+        depths, pos = decode_depths_by_pixel(raw, pos, n)
     one = 0x3F800000 if step == 0.0 else int(round(1.0 / step))
     values = []
     for p in range(pixels):
@@ -267,7 +341,7 @@ def read_map(path):
             hh = min(ts, L.height - ty * ts)
             if tile[1] == 0:
                 continue  # empty: every pixel fully lit
-            raw = inflate(data, tile, "level %d tile %d,%d" % (l, tx, ty))
+            raw = inflate(data, tile, "level %d tile %d,%d" % (l, tx, ty), h.codec)
             if h.required & CODED_TILES:
                 decoded = decode_coded(raw, w * hh, h, L.value_step)
             else:

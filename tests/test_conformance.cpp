@@ -16,6 +16,9 @@ namespace {
 
 const std::string kSample = std::string(DSM_SOURCE_DIR) + "/spec/samples/tiny.dsm";
 const std::string kRichSample = std::string(DSM_SOURCE_DIR) + "/spec/samples/rich.dsm";
+// The same content written by the first 1.1 writer (depth steps within each
+// pixel, no PREDICTED_DEPTHS): readers keep reading such files.
+const std::string kRichFirstCodingSample = std::string(DSM_SOURCE_DIR) + "/spec/samples/rich-first-coding.dsm";
 
 // The content of the sample, as listed in the spec.
 void writeTinySample(const std::string& path) {
@@ -112,11 +115,15 @@ void writeRichSample(const std::string& path) {
 
 }  // namespace
 
-TEST(Conformance, ReaderReadsTheRichSampleAsSpecified) {
-    const auto map = dsm::DeepShadowMap::open(kRichSample);
+namespace {
+
+void expectRichSampleAsSpecified(const std::string& sample, bool predictedDepths) {
+    SCOPED_TRACE(sample);
+    const auto map = dsm::DeepShadowMap::open(sample);
     const dsm::MapInfo& info = map->info();
     EXPECT_EQ(info.versionMinor, 1);
     EXPECT_TRUE(info.codedTiles);
+    EXPECT_EQ(info.predictedDepths, predictedDepths);
     EXPECT_EQ(info.codecLevel, 9);
     EXPECT_EQ(info.areaLightRadius, 0.5);
     EXPECT_EQ(info.areaLightPlaneDepth, 1.0);
@@ -147,9 +154,44 @@ TEST(Conformance, ReaderReadsTheRichSampleAsSpecified) {
                     << "pixel " << x << "," << y;
         }
     EXPECT_EQ(map->pixel(0, 1, 0)->layerBegin(1), 2u);
-    EXPECT_NO_THROW(dsm::validate(kRichSample));
+    EXPECT_NO_THROW(dsm::validate(sample));
 }
 
+}  // namespace
+
+TEST(Conformance, ReaderReadsTheRichSampleAsSpecified) { expectRichSampleAsSpecified(kRichSample, true); }
+
+TEST(Conformance, ReaderReadsTheRichSampleOfTheFirstCodingAsSpecified) {
+    expectRichSampleAsSpecified(kRichFirstCodingSample, false);
+}
+
+// Every level of the first coding's sample, mip levels included, reads as the
+// same map written today: both depth codings give the same depths.
+TEST(Conformance, FirstCodingSampleReadsAsTheMapWrittenToday) {
+    dsm::test::TempDir dir;
+    const std::string path = (dir / "rich.dsm").string();
+    writeRichSample(path);
+    const auto today = dsm::DeepShadowMap::open(path);
+    const auto first = dsm::DeepShadowMap::open(kRichFirstCodingSample);
+    ASSERT_TRUE(today->info().predictedDepths);
+    ASSERT_FALSE(first->info().predictedDepths);
+    ASSERT_EQ(first->info().levels.size(), today->info().levels.size());
+    std::size_t compared = 0;
+    for (unsigned l = 0; l < today->info().levels.size(); ++l) {
+        const dsm::LevelInfo& L = today->info().levels[l];
+        for (std::uint32_t y = 0; y < L.height; ++y)
+            for (std::uint32_t x = 0; x < L.width; ++x) {
+                const dsm::VisibilityFunction want = today->pixel(l, x, y).view().toFunction();
+                ASSERT_TRUE(dsm::test::sameFunction(first->pixel(l, x, y).view(), want, true))
+                    << "level " << l << " pixel " << x << "," << y;
+                compared += want.size();
+            }
+    }
+    EXPECT_GT(compared, 20u);
+}
+
+// Only the samples this writer produces: rich-first-coding.dsm is kept as the
+// first 1.1 writer wrote it, which no writer of today reproduces.
 TEST(Conformance, WriterReproducesTheRichSampleByteForByte) {
     dsm::test::TempDir dir;
     const std::string path = (dir / "rich.dsm").string();

@@ -438,6 +438,23 @@ TEST(MergeStitch, RegionBuildsBecomeTheFullBuildByteForByte) {
     }
 }
 
+// Parts written with zstd stitch into the zstd build, tiles of the same codec and level.
+TEST(MergeStitch, ZstdPartsBecomeTheZstdBuildByteForByte) {
+    TempDir dir;
+    RegionBuild b;
+    b.options.codec = dsm::TileCodec::Zstd;
+    b.options.zstdLevel = 12;
+    const std::string full = b.build(dir / "full.dsm", {0, 0, 0, 0});
+    const std::vector<std::string> parts = {b.build(dir / "left.dsm", {0, 0, 13, 29}),
+                                            b.build(dir / "right.dsm", {13, 0, 37, 29})};
+    MergeOptions options;
+    options.mode = MergeMode::Stitch;
+    const std::string out = (dir / "stitched.dsm").string();
+    mergeMaps(parts, out, options);
+    EXPECT_EQ(DeepShadowMap::open(out)->info().codec, dsm::TileCodec::Zstd);
+    EXPECT_EQ(readFile(out), readFile(full));
+}
+
 TEST(MergeStitch, OverlapsAndHolesAreListed) {
     TempDir dir;
     const RegionBuild b;

@@ -211,6 +211,13 @@ TEST_F(ReaderErrors, UnknownRequiredFlag) {
     expectRejected(b, {"unknown required flags 0x80000000"});
 }
 
+TEST_F(ReaderErrors, PredictedDepthsWithoutCodedTiles) {
+    Bytes b = base_;
+    put(b, 16, (get(b, 16, 4) & ~4u) | 8u, 4);  // PREDICTED_DEPTHS without CODED_TILES
+    fixHeaderCrc(b);
+    expectRejected(b, {"predicted depths flag without the coded tiles flag"});
+}
+
 TEST_F(ReaderErrors, UnknownOptionalFlagsAreIgnored) {
     Bytes b = base_;
     put(b, 20, 0xFFFFFFFFu, 4);

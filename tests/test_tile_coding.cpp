@@ -1,19 +1,23 @@
 // Format 1.1 tile coding: value steps chosen from the tolerance, the stated
 // bound holding for the values as stored, bit-exact round trips of coded
 // tiles (with and without value steps), 1.0 files still read, and the codec,
-// its level and the area light recorded in the header.
+// its level and the area light recorded in the header, and the decoder's
+// checks agreeing with VisibilityView::validate().
 #include <dsm/dsm.h>
+#include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <limits>
 #include <random>
 #include <vector>
 
 #include "map_fixtures.h"
 #include "oracle.h"
 #include "temp_dir.h"
+#include "tile_codec.h"
 
 namespace {
 
@@ -152,15 +156,21 @@ TEST(TileCoding, CodedTilesRoundTripBitForBit) {
     TempDir dir;
     const Image image = randomImage(11, 6, 5);
     for (bool quantise : {false, true}) {
-        for (int zlibLevel : {0, 6}) {
+        for (int zlibLevel : {0, 6, -1}) {  // -1: zstd
             WriterOptions o = smallMap(0.05);
             o.quantiseValues = quantise;
-            o.zlibLevel = zlibLevel;
+            o.zlibLevel = std::max(zlibLevel, 0);
+            if (zlibLevel < 0) {
+                o.codec = dsm::TileCodec::Zstd;
+                o.zstdLevel = 19;
+            }
             const auto path = dir / "coded.dsm";
             dsm::test::writeMap(path, o, image, 7);
             EXPECT_NO_THROW(dsm::validate(path.string()));
             const auto map = DeepShadowMap::open(path.string());
             EXPECT_TRUE(map->info().codedTiles);
+            EXPECT_EQ(map->info().codec, zlibLevel < 0 ? dsm::TileCodec::Zstd : dsm::TileCodec::Zlib);
+            EXPECT_EQ(map->info().codecLevel, zlibLevel < 0 ? 19 : zlibLevel);
             const double step = map->info().levels[0].valueStep;
             EXPECT_EQ(step, quantise ? dsm::valueStep(0.05) : 0.0);
             for (std::uint32_t y = 0; y < image.height; ++y)
@@ -216,7 +226,21 @@ TEST(TileCoding, TheHeaderRecordsTheCodecLevelAndTheAreaLight) {
     EXPECT_EQ(map->info().areaLightRadius, 0.25);
     EXPECT_EQ(map->info().areaLightPlaneDepth, 0.75);
 
-    o.formatMinor = 0;  // 1.0 has no place for them
+    o.codec = dsm::TileCodec::Zstd;
+    o.zstdLevel = 12;
+    dsm::test::writeMap(dir / "zstd.dsm", o, image);
+    const auto zstdMap = DeepShadowMap::open((dir / "zstd.dsm").string());
+    EXPECT_EQ(zstdMap->info().codec, dsm::TileCodec::Zstd);
+    EXPECT_EQ(zstdMap->info().codecLevel, 12);
+    EXPECT_NO_THROW(dsm::validate((dir / "zstd.dsm").string()));
+    o.zstdLevel = 23;
+    EXPECT_THROW(dsm::test::writeMap(dir / "bad.dsm", o, image), dsm::Error);
+    o.zstdLevel = 12;
+    o.formatMinor = 0;  // 1.0 knows zlib alone
+    EXPECT_THROW(dsm::test::writeMap(dir / "old.dsm", o, image), dsm::Error);
+    o.codec = dsm::TileCodec::Zlib;
+
+    // 1.0 has no place for the area light
     EXPECT_THROW(dsm::test::writeMap(dir / "old.dsm", o, image), dsm::Error);
     o.areaLightRadius = 0.0;
     o.quantiseValues = true;
@@ -224,4 +248,71 @@ TEST(TileCoding, TheHeaderRecordsTheCodecLevelAndTheAreaLight) {
     o.formatMinor = 2;
     o.quantiseValues = false;
     EXPECT_THROW(dsm::test::writeMap(dir / "new.dsm", o, image), dsm::Error);
+}
+
+// The coded decoder checks each function while it decodes it; whatever it
+// lets through must be what VisibilityView::validate() accepts, and what it
+// rejects must be reported as validate() reports it.
+TEST(TileCoding, DecodingRejectsExactlyWhatValidationRejects) {
+    const float nan = std::numeric_limits<float>::quiet_NaN(), inf = std::numeric_limits<float>::infinity();
+    struct Case {
+        const char* name;
+        std::vector<std::vector<float>> layers;  // z, V pairs per layer
+        int channels = 1;
+    };
+    const std::vector<Case> cases = {
+        {"valid", {{1.0f, 0.5f, 2.0f, 0.25f}}},
+        {"valid layers", {{1.0f, 0.5f, 2.0f, 0.0f}, {2.0f, 0.75f, 3.0f, 0.5f}}},
+        {"negative zero depth", {{-0.0f, 0.5f, 1.0f, 0.25f}}},
+        {"decreasing depth", {{2.0f, 0.5f, 1.0f, 0.25f}}},
+        {"negative depth", {{-1.0f, 0.5f}}},
+        {"negative depth later", {{1.0f, 0.5f, -1.0f, 0.25f}}},
+        {"nan depth", {{1.0f, 0.5f, nan, 0.25f}}},
+        {"infinite depth", {{1.0f, 0.5f, inf, 0.25f}}},
+        {"increasing value", {{1.0f, 0.5f, 2.0f, 0.75f}}},
+        {"value above one", {{1.0f, 1.5f}}},
+        {"negative value", {{1.0f, -0.5f}}},
+        {"nan value", {{1.0f, nan}}},
+        {"empty layer", {{1.0f, 0.5f}, {}, {2.0f, 0.5f, 3.0f, 0.25f}}},
+        {"trailing empty layer", {{1.0f, 0.5f, 2.0f, 0.25f}, {}}},
+        {"rgb increasing", {{1.0f, 0.5f, 2.0f, 0.25f}}, 3},
+    };
+    for (const Case& c : cases) {
+        for (const double step : {0.0, 1.0 / 128}) {
+            VisibilityFunction f(c.channels);
+            for (std::size_t l = 0; l < c.layers.size(); ++l) {
+                if (l > 0) f.beginLayer();
+                for (std::size_t i = 0; i + 1 < c.layers[l].size(); i += 2) {
+                    float v[3] = {c.layers[l][i + 1], c.layers[l][i + 1], c.layers[l][i + 1]};
+                    if (c.channels == 3 && i > 0) v[1] = 1.0f;  // green rises
+                    f.append(c.layers[l][i], v);
+                }
+            }
+            const auto values = f.allValues();
+            if (step > 0.0 && std::any_of(values.begin(), values.end(), [](float v) { return !(v >= 0.0f && v < 2.0f); }))
+                continue;  // no multiple of a step the coding can hold
+            std::string validateError;
+            try {
+                f.validate();
+            } catch (const dsm::Error& e) {
+                validateError = e.what();
+            }
+            const dsm::format::TileLayout layout{c.channels, false, 3, true, step};
+            const std::vector<VisibilityFunction> pixels = {VisibilityFunction(c.channels), f};
+            const dsm::format::EncodedTile tile = dsm::format::encodeTile(pixels, layout, 0);
+            std::string decodeError;
+            try {
+                const dsm::format::DecodedTile decoded = dsm::format::decodeTile(
+                    tile.stored, tile.summary, 2, 1, layout, dsm::ReaderOptions{}, "tile", 0, 0);
+                EXPECT_TRUE(dsm::test::sameFunction(decoded.pixel(1), f, false)) << c.name << " step " << step;
+            } catch (const dsm::Error& e) {
+                decodeError = e.what();
+            }
+            if (validateError.empty())
+                EXPECT_EQ(decodeError, "") << c.name << " step " << step;
+            else
+                EXPECT_THAT(decodeError, testing::HasSubstr("tile: pixel 1,0: " + validateError))
+                    << c.name << " step " << step;
+        }
+    }
 }

@@ -5,7 +5,7 @@ cmake_minimum_required(VERSION 3.25)
 #                (consumer_core/, find_package(dsm COMPONENTS core)).
 #   MODE=shared  configure SOURCE_DIR as a shared, core-only build
 #                (BUILD_SHARED_LIBS=ON, DSM_CORE_ONLY=ON), install it; its
-#                library may need zlib and the C/C++ runtime only (readelf -d);
+#                library may need zlib, zstd and the C/C++ runtime only (readelf -d);
 #                then the same core consumer.
 # In both modes no installed text file names a path of the build machine, and
 # the core consumer's 1,000 lookups on a map DSM_BUILD makes of SCENE print
@@ -34,8 +34,8 @@ elseif(MODE STREQUAL "shared")
   if(NOT libraries)
     message(FATAL_ERROR "the shared build installed no library under ${prefix}")
   endif()
-  # zlib and the C/C++ runtime, nothing else.
-  set(allowed libz.so.1 libstdc++.so.6 libm.so.6 libgcc_s.so.1 libc.so.6)
+  # zlib, zstd and the C/C++ runtime, nothing else.
+  set(allowed libz.so.1 libzstd.so.1 libstdc++.so.6 libm.so.6 libgcc_s.so.1 libc.so.6)
   foreach(library IN LISTS libraries)
     execute_process(COMMAND readelf -d "${library}" OUTPUT_VARIABLE dynamic RESULT_VARIABLE rc)
     if(NOT rc EQUAL 0)

@@ -5,6 +5,7 @@
 //   format_maps dump FILE   prints every non-empty pixel of every level
 #include <dsm/dsm.h>
 
+#include <algorithm>
 #include <bit>
 #include <cstdio>
 #include <iostream>
@@ -41,7 +42,7 @@ struct Variant {
     bool counts;
     int layers;
     bool quantise;
-    int zlibLevel;
+    int zlibLevel;  // < 0: zstd at level -zlibLevel
     std::uint32_t width, height, tileSize;
 };
 
@@ -54,6 +55,7 @@ void write(const std::string& dir) {
         {"rgb-counts-layers-1.1", 1, 3, true, 3, false, 0, 19, 13, 4},
         {"rgb-counts-quantised-1.1", 1, 3, true, 2, true, 6, 23, 17, 8},
         {"one-pixel-1.1", 1, 3, true, 1, true, 6, 1, 1, 2},
+        {"rgb-counts-quantised-zstd-1.1", 1, 3, true, 2, true, -19, 23, 17, 8},
     };
     std::mt19937_64 rng(2026);
     for (const Variant& v : variants) {
@@ -66,7 +68,11 @@ void write(const std::string& dir) {
         o.maxLayers = v.layers;
         o.formatMinor = v.minor;
         o.quantiseValues = v.quantise;
-        o.zlibLevel = v.zlibLevel;
+        o.zlibLevel = std::max(v.zlibLevel, 0);
+        if (v.zlibLevel < 0) {
+            o.codec = dsm::TileCodec::Zstd;
+            o.zstdLevel = -v.zlibLevel;
+        }
         o.tolerance = 0.02;
         o.metadata = "{\"variant\":\"" + v.name + "\"}";
         dsm::MapWriter writer(dir + "/" + v.name + ".dsm", o);

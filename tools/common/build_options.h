@@ -22,11 +22,12 @@ struct BuildOptionText {
     std::string filter = "gaussian";
     std::string mipLevels = "auto";
     std::string sampler = "scanline";
+    std::string codec = "zlib";
     std::uint64_t maxSceneMiB = SceneReadOptions{}.maxBytes >> 20;
 };
 
-/// Declares -r, -s, -e, -f, -w, -m, -t, -l, --sampler, --counts, --seed, -z
-/// and --max-scene-mb on `app` (or a subcommand), bound to `text`.
+/// Declares -r, -s, -e, -f, -w, -m, -t, -l, --sampler, --counts, --seed, -z,
+/// --codec, --zstd-level and --max-scene-mb on `app` (or a subcommand), bound to `text`.
 void addBuildOptions(CLI::App& app, BuildOptionText& text);
 
 /// text.options with the resolution, tolerance, mip levels and filter parsed.

@@ -51,7 +51,7 @@ std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent
     j["file_bytes"] = info.fileBytes;
     j["format_version"] = std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor);
     j["tile_coding"] = {{"coded", info.codedTiles},
-                        {"codec", "zlib"},
+                        {"codec", info.codec == dsm::TileCodec::Zstd ? "zstd" : "zlib"},
                         {"level", info.codecLevel >= 0 ? Json(info.codecLevel) : Json(nullptr)}};
     j["area_light"] = {{"radius", info.areaLightRadius}, {"plane_depth", info.areaLightPlaneDepth}};
     j["width"] = info.width;

@@ -290,7 +290,7 @@ void printMetadata(std::ostream& out, const std::string& metadata) {
 
 /// "coded (1.1), zlib level 6" or "arrays (1.0), zlib, level not recorded".
 std::string codingText(const dsm::MapInfo& info) {
-    const std::string codec = "zlib";  // the one codec of format 1.x
+    const std::string codec = info.codec == dsm::TileCodec::Zstd ? "zstd" : "zlib";
     return std::string(info.codedTiles ? "coded (1.1)" : "arrays (1.0)") + ", " + codec +
            (info.codecLevel >= 0 ? " level " + std::to_string(info.codecLevel) : ", level not recorded");
 }

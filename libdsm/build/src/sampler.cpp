@@ -187,6 +187,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     w.mipLevels = options.mipLevels;
     w.levelToleranceFactor = options.levelToleranceFactor;
     w.zlibLevel = options.zlibLevel;
+    w.codec = options.codec;
+    w.zstdLevel = options.zstdLevel;
     w.quantiseValues = true;
     if (light.areaLightRadius > 0.0 && camera.projection == Projection::Perspective) {
         // The push-back lightCamera applied: the light's plane lies at this

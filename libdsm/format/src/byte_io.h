@@ -91,18 +91,8 @@ class VarintReader {
 public:
     VarintReader(const std::uint8_t* begin, const std::uint8_t* end) : at_(begin), end_(end) {}
     std::uint32_t next() {
-        if (at_ != end_ && *at_ < 0x80) return *at_++;  // the common one-byte value
-        std::uint32_t v = 0;
-        for (int shift = 0; shift < 35; shift += 7) {
-            if (at_ == end_) break;
-            const std::uint8_t b = *at_++;
-            if (shift == 28 && b > 0x0F) break;  // more than 32 bits
-            v |= static_cast<std::uint32_t>(b & 0x7F) << shift;
-            if (b < 0x80) return v;
-        }
-        bad_ = true;
-        at_ = end_;
-        return 0;
+        if (end_ - at_ >= 5) return nextUnchecked();
+        return nextChecked();
     }
     std::uint8_t byte() {
         if (at_ == end_) {
@@ -116,6 +106,46 @@ public:
     std::size_t remaining() const { return static_cast<std::size_t>(end_ - at_); }
 
 private:
+    // At least 5 bytes left: no bounds check per byte (the hot path of tile
+    // decoding).
+    std::uint32_t nextUnchecked() {
+        std::uint32_t b = at_[0];
+        if (b < 0x80) {
+            ++at_;
+            return b;
+        }
+        std::uint32_t v = b & 0x7F;
+        for (int i = 1; i < 4; ++i) {
+            b = at_[i];
+            v |= (b & 0x7F) << (7 * i);
+            if (b < 0x80) {
+                at_ += i + 1;
+                return v;
+            }
+        }
+        b = at_[4];
+        if (b > 0x0F) {  // more than 32 bits
+            bad_ = true;
+            at_ = end_;
+            return 0;
+        }
+        at_ += 5;
+        return v | (b << 28);
+    }
+    std::uint32_t nextChecked() {
+        std::uint32_t v = 0;
+        for (int shift = 0; shift < 35; shift += 7) {
+            if (at_ == end_) break;
+            const std::uint8_t b = *at_++;
+            if (shift == 28 && b > 0x0F) break;  // more than 32 bits
+            v |= static_cast<std::uint32_t>(b & 0x7F) << shift;
+            if (b < 0x80) return v;
+        }
+        bad_ = true;
+        at_ = end_;
+        return 0;
+    }
+
     const std::uint8_t* at_;
     const std::uint8_t* end_;
     bool bad_ = false;

@@ -142,9 +142,14 @@ Header decodeHeader(const std::uint8_t* data, std::size_t available, std::uint64
         fail(concat("header size ", h.headerSize, " is below the ", kHeaderSize11, " of version 1.", h.versionMinor));
     if ((h.requiredFlags & kRequiredCodedTiles) && h.versionMinor < 1)
         fail(concat("coded tiles flag in a version 1.", h.versionMinor, " file"));
-    if (h.codec != kCodecZlib)
+    if ((h.requiredFlags & kRequiredPredictedDepths) && !(h.requiredFlags & kRequiredCodedTiles))
+        fail("predicted depths flag without the coded tiles flag");
+    if (h.codec != kCodecZlib && h.codec != kCodecZstd)
         fail(concat("unknown tile codec ", int(h.codec)), ErrorCode::unsupported);
-    if (h.codecLevel > kMaxZlibLevel) fail(concat("zlib level ", int(h.codecLevel), " is not in [0, 9]"));
+    if (h.codec == kCodecZlib && h.codecLevel > kMaxZlibLevel)
+        fail(concat("zlib level ", int(h.codecLevel), " is not in [0, ", kMaxZlibLevel, "]"));
+    if (h.codec == kCodecZstd && h.codecLevel > kMaxZstdLevel)
+        fail(concat("zstd level ", int(h.codecLevel), " is not in [0, ", kMaxZstdLevel, "]"));
     if (!std::isfinite(h.areaLightRadius) || h.areaLightRadius < 0.0 || !std::isfinite(h.areaLightPlaneDepth) ||
         h.areaLightPlaneDepth < 0.0)
         fail(concat("area light radius ", h.areaLightRadius, " or plane depth ", h.areaLightPlaneDepth,
@@ -258,7 +263,8 @@ Header headerFromInfo(const MapInfo& info, std::uint16_t minor) {
     h.channels = static_cast<std::uint8_t>(info.channels);
     h.maxLayers = static_cast<std::uint8_t>(info.maxLayers);
     h.requiredFlags = (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u) |
-                      (info.codedTiles ? kRequiredCodedTiles : 0u);
+                      (info.codedTiles ? kRequiredCodedTiles : 0u) |
+                      (info.codedTiles && info.predictedDepths ? kRequiredPredictedDepths : 0u);
     h.codec = static_cast<std::uint8_t>(info.codec);
     h.codecLevel = static_cast<std::uint8_t>(std::max(info.codecLevel, 0));
     h.areaLightRadius = info.areaLightRadius;
@@ -290,6 +296,7 @@ void infoFromHeader(const Header& h, MapInfo& info) {
     info.camera.nearPlane = h.nearPlane;
     info.fileBytes = h.fileSize;
     info.codedTiles = (h.requiredFlags & kRequiredCodedTiles) != 0;
+    info.predictedDepths = (h.requiredFlags & kRequiredPredictedDepths) != 0;
     info.codec = static_cast<TileCodec>(h.codec);
     info.codecLevel = h.headerSize >= kHeaderSize11 ? h.codecLevel : -1;
     info.areaLightRadius = h.areaLightRadius;

@@ -32,11 +32,15 @@ inline constexpr std::uint32_t kHeaderCrcOffset = 228;
 inline constexpr std::uint32_t kRequiredHasCounts = 1u << 0;
 inline constexpr std::uint32_t kRequiredHasLayers = 1u << 1;
 inline constexpr std::uint32_t kRequiredCodedTiles = 1u << 2;  // 1.1
-inline constexpr std::uint32_t kKnownRequiredFlags = kRequiredHasCounts | kRequiredHasLayers | kRequiredCodedTiles;
+inline constexpr std::uint32_t kRequiredPredictedDepths = 1u << 3;  // 1.1, with coded tiles
+inline constexpr std::uint32_t kKnownRequiredFlags =
+    kRequiredHasCounts | kRequiredHasLayers | kRequiredCodedTiles | kRequiredPredictedDepths;
 
 // Tile codecs (header field `codec`, 1.1) and their level ranges.
 inline constexpr std::uint8_t kCodecZlib = 0;
+inline constexpr std::uint8_t kCodecZstd = 1;
 inline constexpr int kMaxZlibLevel = 9;
+inline constexpr int kMaxZstdLevel = 22;
 
 // The finest value step a level may record: 2^-24.
 inline constexpr int kFinestValueStepExponent = 24;

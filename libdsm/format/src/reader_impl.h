@@ -52,7 +52,10 @@ struct DeepShadowMap::Impl {
     }
 
     format::TileLayout layout(unsigned level) const {
-        return {info.channels, info.hasCounts, info.maxLayers, info.codedTiles, info.levels[level].valueStep};
+        return {info.channels,   info.hasCounts,
+                info.maxLayers,  info.codedTiles,
+                info.levels[level].valueStep, info.codec,
+                info.predictedDepths};
     }
 
     std::uint32_t tileExtent(std::uint32_t levelExtent, std::uint32_t t) const {

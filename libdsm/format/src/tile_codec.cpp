@@ -7,6 +7,7 @@
 #include <limits>
 
 #include <zlib.h>
+#include <zstd.h>
 
 #include "byte_io.h"
 #include "dsm/error.h"
@@ -65,7 +66,7 @@ std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pix
 
 // The 1.1 coding: every part of the tile in turn, as variable-length
 // integers, each small for the data deep shadow maps hold (spec §7).
-// `partEnds` receives where the depths, the values and the counts begin.
+// `partEnds` receives where the depth steps, the values and the counts begin.
 std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pixels, const TileLayout& layout,
                                          std::vector<std::size_t>& partEnds) {
     std::vector<std::uint8_t> raw;
@@ -76,22 +77,27 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     for (const VisibilityFunction& f : pixels)
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer)
             w.varint(static_cast<std::uint32_t>(f.layerBegin(layer) - f.layerBegin(layer - 1)));
-    partEnds.push_back(raw.size());
-    // Depths: float32 bit patterns, which rise with the depth. A pixel's first
-    // from the previous non-empty pixel's first (signed), the rest from the
-    // vertex before.
-    std::uint32_t previousFirst = 0;
+    // Depths: float32 bit patterns, which rise with the depth. Each pixel's
+    // ends (first and last depth) from the previous non-empty pixel's
+    // (signed), in the part of the pixel table; then, in a part of their own,
+    // the steps between the depths in between. The ends of neighbouring
+    // pixels lie close (a receiver's depth changes smoothly across the map),
+    // the steps within a pixel do not: 6 % smaller than steps from the first
+    // depth on over the hair ball.
+    std::uint32_t previousFirst = 0, previousLast = 0;
     for (const VisibilityFunction& f : pixels) {
         if (f.empty()) continue;
-        std::uint32_t previous = std::bit_cast<std::uint32_t>(f.z(0));
-        w.varint(zigzag(previous - previousFirst));
-        previousFirst = previous;
-        for (std::size_t i = 1; i < f.size(); ++i) {
-            const std::uint32_t bits = std::bit_cast<std::uint32_t>(f.z(i));
-            w.varint(bits - previous);
-            previous = bits;
-        }
+        const std::uint32_t first = std::bit_cast<std::uint32_t>(f.z(0));
+        const std::uint32_t last = std::bit_cast<std::uint32_t>(f.z(f.size() - 1));
+        w.varint(zigzag(first - previousFirst));
+        if (f.size() > 1) w.varint(zigzag(last - previousLast));
+        previousFirst = first;
+        previousLast = last;
     }
+    partEnds.push_back(raw.size());
+    for (const VisibilityFunction& f : pixels)
+        for (std::size_t i = 1; i + 1 < f.size(); ++i)
+            w.varint(std::bit_cast<std::uint32_t>(f.z(i)) - std::bit_cast<std::uint32_t>(f.z(i - 1)));
     partEnds.push_back(raw.size());
     // Values: per channel, the fall from the previous vertex of the layer (from
     // 1 at a layer's first vertex).
@@ -137,6 +143,7 @@ std::vector<std::uint8_t> deflateParts(const std::vector<std::uint8_t>& raw, con
         z.next_in = const_cast<Bytef*>(raw.data() + begin);
         z.avail_in = static_cast<uInt>(end - begin);
         const bool last = k == partEnds.size();
+        if (!last && end == begin) continue;  // an empty part ends no block (zlib would make no progress)
         const int rc = deflate(&z, last ? Z_FINISH : Z_BLOCK);
         ok = last ? rc == Z_STREAM_END : rc == Z_OK && z.avail_in == 0;
         begin = end;
@@ -185,7 +192,19 @@ VisibilityView DecodedTile::pixel(std::size_t p) const {
                           std::span<const std::uint32_t>(layerStarts_ + a.layerStart, b.layerStart - a.layerStart));
 }
 
-EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int zlibLevel) {
+// `raw` as one zstd frame at `level`; empty when zstd fails.
+std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int level) {
+    std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));
+    const std::size_t n = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), level);
+    if (ZSTD_isError(n)) return {};
+    out.resize(n);
+    return out;
+}
+
+EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int codecLevel) {
+    if (layout.coded && !layout.predictedDepths)
+        throw Error(ErrorCode::internal, "coded tiles are written with predicted depths only");
+    const int zlibLevel = layout.codec == TileCodec::Zlib ? codecLevel : 0;
     EncodedTile out;
     TileSummary& s = out.summary;
     std::uint64_t vertices = 0;
@@ -210,7 +229,11 @@ EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLay
     if (raw.size() > UINT32_MAX) throw Error(ErrorCode::limit, concat("tile of ", raw.size(), " bytes exceeds 4 GiB"));
     s.rawBytes = static_cast<std::uint32_t>(raw.size());
 
-    if (zlibLevel > 0 && layout.coded) {
+    if (layout.codec == TileCodec::Zstd && codecLevel > 0) {
+        std::vector<std::uint8_t> packed = zstdFrame(raw, codecLevel);
+        if (packed.empty()) throw Error(ErrorCode::internal, "zstd failed to compress a tile");
+        if (packed.size() < raw.size()) out.stored = std::move(packed);
+    } else if (zlibLevel > 0 && layout.coded) {
         std::vector<std::uint8_t> packed = deflateParts(raw, partEnds, zlibLevel);
         if (packed.empty()) throw Error(ErrorCode::internal, "zlib failed to compress a tile");
         if (packed.size() < raw.size()) out.stored = std::move(packed);
@@ -280,7 +303,7 @@ void readLayerCounts(ReadLayers readLayers, std::vector<PixelRecord>& records, c
     for (std::size_t p = 0; p + 1 < records.size(); ++p) {
         const std::uint8_t layers = readLayers();
         const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
-        checkLayerCount(layers, n, p, shape, layout, fail);
+        if (layers != 1) checkLayerCount(layers, n, p, shape, layout, fail);  // 1 is always valid
         layerTotal += layers - 1u;
         valueTotal += std::uint64_t(n) * records[p].channels;
         records[p + 1].valueStart = static_cast<std::uint32_t>(valueTotal);
@@ -334,8 +357,143 @@ DecodedTile parsePlainTile(std::span<const std::uint8_t> raw, const TileSummary&
     return tile;
 }
 
+// What the coded decoder's own checks found while decoding, so that the
+// functions need no second pass: the depth range, the non-empty pixels, and
+// whether anything looked wrong (a depth not finite, negative or decreasing, a
+// value outside [0, 1] or increasing, a layer start out of order). Anything
+// wrong sends the tile through VisibilityView::validate(), which names the
+// fault (and accepts what these checks reject only conservatively, such as a
+// depth of -0).
+struct DecodeChecks {
+    bool suspect = false;
+    std::uint32_t minBits = UINT32_MAX;
+    std::uint32_t maxBits = 0;
+    std::uint32_t nonEmptyPixels = 0;
+};
+
+constexpr std::uint32_t kInfinityBits = 0x7F800000;  // bits(+inf): finite non-negative floats lie below it
+
+// Values of one layer run of `n` vertices of `c` channels: each the previous
+// key less a difference, from `one`. `Quantised`: keys are multiples of the
+// step; otherwise float32 bits.
+template <bool Quantised>
+void decodeValueRun(VarintReader& r, std::uint32_t n, std::uint32_t c, std::uint32_t one, float step, float*& out,
+                    bool& suspect) {
+    const auto toFloat = [step](std::uint32_t key) {
+        // A key of a quantised value is at most 2^24: converted as a signed
+        // 32-bit integer, which is one instruction.
+        if constexpr (Quantised) return static_cast<float>(static_cast<std::int32_t>(key)) * step;
+        else return std::bit_cast<float>(key);
+    };
+    if (c == 1) {
+        std::uint32_t key = one;
+        for (std::uint32_t i = 0; i < n; ++i) {
+            const std::uint32_t d = r.next();
+            suspect |= d > key;
+            key -= d;
+            *out++ = toFloat(key);
+        }
+        return;
+    }
+    std::uint32_t key[3] = {one, one, one};
+    for (std::uint32_t i = 0; i < n; ++i)
+        for (std::uint32_t k = 0; k < 3; ++k) {
+            const std::uint32_t d = r.next();
+            suspect |= d > key[k];
+            key[k] -= d;
+            *out++ = toFloat(key[k]);
+        }
+}
+
+template <bool Quantised>
+void decodeValues(VarintReader& r, const PixelRecord* records, std::size_t pixels, const std::uint32_t* layerStarts,
+                  float* v, std::uint32_t one, float step, bool& suspect) {
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const PixelRecord& a = records[p];
+        const std::uint32_t n = records[p + 1].vertexStart - a.vertexStart;
+        float* out = v + a.valueStart;
+        std::uint32_t begin = 0;
+        for (std::uint32_t l = a.layerStart; l <= records[p + 1].layerStart; ++l) {
+            // Layer starts out of order were flagged when read; clamped here so
+            // that the run stays within the pixel.
+            const std::uint32_t end =
+                l < records[p + 1].layerStart ? std::min(std::max(layerStarts[l], begin), n) : n;
+            decodeValueRun<Quantised>(r, end - begin, a.channels, one, step, out, suspect);
+            begin = end;
+        }
+    }
+}
+
+// Depths are float32 bit patterns: non-decreasing ones below bits(+inf) are
+// finite, non-negative, non-decreasing depths.
+
+// A pixel's first and last depth, noted for the checks of the whole tile.
+void noteDepthEnds(std::uint32_t first, std::uint32_t last, DecodeChecks& checks) {
+    ++checks.nonEmptyPixels;
+    checks.suspect |= last < first || last >= kInfinityBits;
+    checks.minBits = std::min(checks.minBits, first);
+    checks.maxBits = std::max(checks.maxBits, last);
+}
+
+// The depths z[from + 1 .. to - 1], each a step up from the one before;
+// returns the last one's bits (z[from]'s when there are none).
+std::uint32_t decodeDepthSteps(VarintReader& r, float* z, std::uint32_t from, std::uint32_t to, bool& wrapped) {
+    std::uint32_t bits = std::bit_cast<std::uint32_t>(z[from]);
+    for (std::uint32_t i = from + 1; i < to; ++i) {
+        const std::uint32_t next = bits + r.next();
+        wrapped |= next < bits;
+        bits = next;
+        z[i] = std::bit_cast<float>(bits);
+    }
+    return bits;
+}
+
+// PREDICTED_DEPTHS (spec §7): the ends of every pixel, each from the previous
+// non-empty pixel's, then the steps between them.
+void decodePredictedDepths(VarintReader& r, const PixelRecord* records, std::size_t pixels, float* z,
+                           DecodeChecks& checks) {
+    std::uint32_t previousFirst = 0, previousLast = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (a == b) continue;
+        const std::uint32_t first = previousFirst + unzigzag(r.next());
+        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(r.next()) : first;
+        previousFirst = first;
+        previousLast = last;
+        noteDepthEnds(first, last, checks);
+        z[a] = std::bit_cast<float>(first);
+        z[b - 1] = std::bit_cast<float>(last);
+    }
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (b - a < 3) continue;
+        bool wrapped = false;
+        const std::uint32_t bits = decodeDepthSteps(r, z, a, b - 1, wrapped);
+        checks.suspect |= wrapped || bits > std::bit_cast<std::uint32_t>(z[b - 1]);
+    }
+}
+
+// The first 1.1 coding (files without PREDICTED_DEPTHS): pixel by pixel, the
+// first depth from the previous non-empty pixel's first, the rest as steps.
+void decodeDepthsByPixel(VarintReader& r, const PixelRecord* records, std::size_t pixels, float* z,
+                         DecodeChecks& checks) {
+    std::uint32_t previousFirst = 0;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
+        if (a == b) continue;
+        const std::uint32_t first = previousFirst + unzigzag(r.next());
+        previousFirst = first;
+        z[a] = std::bit_cast<float>(first);
+        bool wrapped = false;
+        const std::uint32_t last = decodeDepthSteps(r, z, a, b, wrapped);
+        checks.suspect |= wrapped;
+        noteDepthEnds(first, last, checks);
+    }
+}
+
 DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary& summary, const TileShape& shape,
-                           const TileLayout& layout, const ReaderOptions& limits, const Fail& fail) {
+                           const TileLayout& layout, const ReaderOptions& limits, const Fail& fail,
+                           DecodeChecks& checks) {
     const std::size_t pixels = shape.pixels;
     VarintReader r(raw.data(), raw.data() + raw.size());
     std::vector<PixelRecord> records(pixels + 1, PixelRecord{0, 0, 0, 1});
@@ -352,7 +510,8 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
         fail(concat("pixel table holds ", total, total > summary.vertexCount ? " or more" : "",
                     " vertices, the directory ", summary.vertexCount),
              ErrorCode::corrupt);
-    for (std::size_t p = 0; p < pixels; ++p) readPixelFlag(r.byte(), records[p], p, shape, layout, fail);
+    for (std::size_t p = 0; p < pixels; ++p)
+        if (const std::uint8_t flags = r.byte(); flags != 0) readPixelFlag(flags, records[p], p, shape, layout, fail);
     std::uint64_t layerTotal = 0, valueTotal = 0;
     readLayerCounts([&] { return r.byte(); }, records, shape, layout, fail, layerTotal, valueTotal);
     if (!r.ok()) fail("tile data is truncated in its pixel table", ErrorCode::corrupt);
@@ -368,44 +527,23 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
     std::copy(records.begin(), records.end(), tile.records());
     std::uint32_t* const layerStarts = tile.layerStarts();
     for (std::size_t p = 0; p < pixels; ++p) {
+        const std::uint32_t n = records[p + 1].vertexStart - records[p].vertexStart;
         std::uint32_t start = 0;
-        for (std::uint32_t l = records[p].layerStart; l < records[p + 1].layerStart; ++l)
-            layerStarts[l] = start += r.next();
-    }
-    float* const z = tile.depths();
-    std::uint32_t previousFirst = 0;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
-        if (a == b) continue;
-        std::uint32_t bits = previousFirst + unzigzag(r.next());
-        previousFirst = bits;
-        z[a] = std::bit_cast<float>(bits);
-        for (std::uint32_t i = a + 1; i < b; ++i) z[i] = std::bit_cast<float>(bits += r.next());
-    }
-    float* const v = tile.values();
-    const double step = layout.valueStep;
-    const float stepFloat = static_cast<float>(step);  // a power of two: exact
-    const std::uint32_t one = step == 0.0 ? std::bit_cast<std::uint32_t>(1.0f) : static_cast<std::uint32_t>(1.0 / step);
-    const std::uint32_t* const starts = layerStarts;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const PixelRecord& a = records[p];
-        const std::uint32_t n = records[p + 1].vertexStart - a.vertexStart;
-        const std::uint32_t c = a.channels;
-        std::uint32_t key[3] = {one, one, one};
-        std::uint32_t layer = a.layerStart;
-        const std::uint32_t layerEnd = records[p + 1].layerStart;
-        float* out = v + a.valueStart;
-        for (std::uint32_t i = 0; i < n; ++i) {
-            if (layer < layerEnd && i == starts[layer]) {
-                key[0] = key[1] = key[2] = one;
-                ++layer;
-            }
-            for (std::uint32_t k = 0; k < c; ++k) {
-                key[k] -= r.next();
-                *out++ = step == 0.0 ? std::bit_cast<float>(key[k]) : static_cast<float>(key[k]) * stepFloat;
-            }
+        for (std::uint32_t l = records[p].layerStart; l < records[p + 1].layerStart; ++l) {
+            const std::uint32_t d = r.next();
+            checks.suspect |= d == 0 || d >= n - start;  // not strictly inside (start, n)
+            layerStarts[l] = start += d;
         }
     }
+    if (layout.predictedDepths) decodePredictedDepths(r, records.data(), pixels, tile.depths(), checks);
+    else decodeDepthsByPixel(r, records.data(), pixels, tile.depths(), checks);
+    const double step = layout.valueStep;
+    if (step == 0.0)
+        decodeValues<false>(r, records.data(), pixels, layerStarts, tile.values(), std::bit_cast<std::uint32_t>(1.0f),
+                            0.0f, checks.suspect);
+    else  // a power of two: the float and the key of 1 are exact
+        decodeValues<true>(r, records.data(), pixels, layerStarts, tile.values(),
+                           static_cast<std::uint32_t>(1.0 / step), static_cast<float>(step), checks.suspect);
     if (layout.hasCounts) {
         std::uint32_t* const counts = tile.counts();
         for (std::uint32_t i = 0; i < summary.vertexCount; ++i) counts[i] = r.next();
@@ -414,6 +552,29 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
     if (!r.atEnd())
         fail(concat("tile holds ", r.remaining(), " bytes after what its pixel table describes"), ErrorCode::corrupt);
     return tile;
+}
+
+// Checks every function of a tile (VisibilityView::validate) and gathers
+// the depth range and the non-empty pixels.
+DecodeChecks checkFunctions(const DecodedTile& tile, const TileShape& shape, const Fail& fail) {
+    DecodeChecks checks;
+    float minZ = std::numeric_limits<float>::infinity(), maxZ = -std::numeric_limits<float>::infinity();
+    for (std::size_t p = 0; p < shape.pixels; ++p) {
+        const VisibilityView view = tile.pixel(p);
+        try {
+            view.validate();
+        } catch (const Error& e) {
+            fail(concat(shape.pixelAt(p), ": ", e.what()), ErrorCode::corrupt);
+        }
+        if (!view.empty()) {
+            ++checks.nonEmptyPixels;
+            minZ = std::min(minZ, view.z(0));
+            maxZ = std::max(maxZ, view.z(view.size() - 1));
+        }
+    }
+    checks.minBits = std::bit_cast<std::uint32_t>(minZ);
+    checks.maxBits = std::bit_cast<std::uint32_t>(maxZ);
+    return checks;
 }
 
 }  // namespace
@@ -432,45 +593,42 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     if (summary.rawBytes > limits.maxTileBytes)
         fail(concat("tile of ", summary.rawBytes, " bytes exceeds the reader's limit ", limits.maxTileBytes),
              ErrorCode::limit);
-    std::vector<std::uint8_t> inflated;
+    std::unique_ptr<std::uint8_t[]> inflated;  // not zeroed first: inflate writes all of it or fails
     std::span<const std::uint8_t> raw = stored;
-    if (summary.storedBytes < summary.rawBytes) {
-        inflated.resize(summary.rawBytes);
+    if (summary.storedBytes < summary.rawBytes && layout.codec == TileCodec::Zstd) {
+        inflated.reset(new std::uint8_t[summary.rawBytes]);
+        const std::size_t size = ZSTD_decompress(inflated.get(), summary.rawBytes, stored.data(), stored.size());
+        if (ZSTD_isError(size))
+            fail(concat("zstd cannot decompress the tile (", ZSTD_getErrorName(size), ")"), ErrorCode::corrupt);
+        if (size != summary.rawBytes)
+            fail(concat("tile decompresses to ", size, " bytes, not ", summary.rawBytes), ErrorCode::corrupt);
+        raw = std::span<const std::uint8_t>(inflated.get(), summary.rawBytes);
+    } else if (summary.storedBytes < summary.rawBytes) {
+        inflated.reset(new std::uint8_t[summary.rawBytes]);
         uLongf size = summary.rawBytes;
-        const int rc = uncompress(inflated.data(), &size, stored.data(), static_cast<uLong>(stored.size()));
+        const int rc = uncompress(inflated.get(), &size, stored.data(), static_cast<uLong>(stored.size()));
         if (rc != Z_OK) fail(concat("zlib cannot inflate the tile (error ", rc, ")"), ErrorCode::corrupt);
         if (size != summary.rawBytes)
             fail(concat("tile inflates to ", size, " bytes, not ", summary.rawBytes), ErrorCode::corrupt);
-        raw = inflated;
+        raw = std::span<const std::uint8_t>(inflated.get(), summary.rawBytes);
     } else if (summary.storedBytes > summary.rawBytes) {
         fail(concat("stored size ", summary.storedBytes, " exceeds the raw size ", summary.rawBytes), ErrorCode::corrupt);
     }
 
     const TileShape shape{width, height, pixels,
                           [&](std::size_t p) { return concat("pixel ", originX + p % width, ",", originY + p / width); }};
-    DecodedTile tile = layout.coded ? parseCodedTile(raw, summary, shape, layout, limits, fail)
+    DecodeChecks checks;
+    DecodedTile tile = layout.coded ? parseCodedTile(raw, summary, shape, layout, limits, fail, checks)
                                     : parsePlainTile(raw, summary, shape, layout, limits, fail);
-    float minZ = std::numeric_limits<float>::infinity(), maxZ = -std::numeric_limits<float>::infinity();
-    std::uint32_t nonEmpty = 0;
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const VisibilityView view = tile.pixel(p);
-        try {
-            view.validate();
-        } catch (const Error& e) {
-            fail(concat(shape.pixelAt(p), ": ", e.what()), ErrorCode::corrupt);
-        }
-        if (!view.empty()) {
-            ++nonEmpty;
-            minZ = std::min(minZ, view.z(0));
-            maxZ = std::max(maxZ, view.z(view.size() - 1));
-        }
-    }
+    if (!layout.coded || checks.suspect) checks = checkFunctions(tile, shape, fail);
+    const float minZ = std::bit_cast<float>(checks.minBits), maxZ = std::bit_cast<float>(checks.maxBits);
     if (minZ != summary.minZ || maxZ != summary.maxZ)
         fail(concat("depth range [", minZ, ", ", maxZ, "] differs from the directory's [", summary.minZ, ", ",
                     summary.maxZ, "]"),
              ErrorCode::corrupt);
-    if (nonEmpty != summary.nonEmptyPixels)
-        fail(concat(nonEmpty, " non-empty pixels, the directory says ", summary.nonEmptyPixels), ErrorCode::corrupt);
+    if (checks.nonEmptyPixels != summary.nonEmptyPixels)
+        fail(concat(checks.nonEmptyPixels, " non-empty pixels, the directory says ", summary.nonEmptyPixels),
+             ErrorCode::corrupt);
     return tile;
 }
 

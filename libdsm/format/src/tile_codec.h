@@ -74,6 +74,12 @@ struct TileLayout {
     bool coded = false;
     /// The level's value step (coded tiles only; 0: values as float32 bits).
     double valueStep = 0.0;
+    /// The compressor of tiles stored compressed.
+    TileCodec codec = TileCodec::Zlib;
+    /// Coded tiles' depths: each pixel's ends predicted from the previous
+    /// pixel's (PREDICTED_DEPTHS, what the writer writes); false for the first
+    /// 1.1 coding, steps within each pixel, which is read only.
+    bool predictedDepths = true;
 };
 
 struct EncodedTile {
@@ -82,11 +88,11 @@ struct EncodedTile {
 };
 
 /// Serialises `pixels` (width * height, row order, already valid; with a
-/// value step, every value a multiple of it) and compresses with zlib at
-/// `zlibLevel` when that makes the tile smaller.
-EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int zlibLevel);
+/// value step, every value a multiple of it) and compresses with the layout's
+/// codec at `codecLevel` (0: not at all) when that makes the tile smaller.
+EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int codecLevel);
 
-/// Checks the CRC of `stored`, inflates it, parses and checks the layout and
+/// Checks the CRC of `stored`, decompresses it, parses and checks the layout and
 /// every function. Throws dsm::Error prefixed with `where` (file, level, tile),
 /// naming the pixel (in level coordinates, from the tile's origin) at fault.
 DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& summary, std::uint32_t width,

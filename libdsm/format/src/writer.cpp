@@ -24,6 +24,9 @@ namespace {
 // Rounding of double values to the stored float32 (see compressor.h).
 constexpr double kStoreRounding = 0x1p-25;
 
+// The level of the codec the options choose.
+int codecLevel(const WriterOptions& o) { return o.codec == TileCodec::Zstd ? o.zstdLevel : o.zlibLevel; }
+
 struct Level {
     LevelInfo info;
     std::vector<TileSummary> directory;
@@ -65,12 +68,12 @@ struct MapWriter::Impl {
         Level& L = levels[level];
         const std::uint32_t index = ty * L.info.tilesX + tx;
         const format::TileLayout layout{options.channels, options.counts, options.maxLayers, options.formatMinor >= 1,
-                                        L.info.valueStep};
+                                        L.info.valueStep, options.codec};
         if (L.info.valueStep > 0.0)
             for (VisibilityFunction& f : pixels)
                 if (!f.empty()) f = roundValues(f, L.info.valueStep);
         format::EncodedTile encoded =
-            pixels.empty() ? format::EncodedTile{} : format::encodeTile(pixels, layout, options.zlibLevel);
+            pixels.empty() ? format::EncodedTile{} : format::encodeTile(pixels, layout, codecLevel(options));
         if (!encoded.stored.empty()) {
             encoded.summary.offset = offset;
             writeBytes(encoded.stored.data(), encoded.stored.size());
@@ -171,6 +174,9 @@ MapWriter::MapWriter(const std::string& path, const WriterOptions& options) try 
     if (!std::isfinite(options.levelToleranceFactor) || options.levelToleranceFactor <= 0.0)
         fail(concat("level tolerance factor ", options.levelToleranceFactor, " is not a finite value > 0"));
     if (options.zlibLevel < 0 || options.zlibLevel > 9) fail(concat("zlib level ", options.zlibLevel, " is not in [0, 9]"));
+    if (options.codec != TileCodec::Zlib && options.codec != TileCodec::Zstd) fail("unknown tile codec");
+    if (options.zstdLevel < 0 || options.zstdLevel > 22) fail(concat("zstd level ", options.zstdLevel, " is not in [0, 22]"));
+    if (options.codec == TileCodec::Zstd && options.formatMinor < 1) fail("zstd tiles need format 1.1");
     if (!std::isfinite(options.filterWidth) || options.filterWidth < 0.0)
         fail(concat("filter width ", options.filterWidth, " is not a finite value >= 0"));
     if (static_cast<unsigned>(options.filter) > 2) fail("unknown pixel filter");
@@ -289,7 +295,9 @@ void MapWriter::finish() try {
     info.filterWidth = s.options.filterWidth;
     for (const Level& L : s.levels) info.levels.push_back(L.info);
     info.codedTiles = s.options.formatMinor >= 1;
-    info.codecLevel = s.options.zlibLevel;
+    info.predictedDepths = info.codedTiles;
+    info.codec = s.options.codec;
+    info.codecLevel = codecLevel(s.options);
     info.areaLightRadius = s.options.areaLightRadius;
     info.areaLightPlaneDepth = s.options.areaLightPlaneDepth;
     format::Header header = format::headerFromInfo(info, s.options.formatMinor);

@@ -314,6 +314,8 @@ void requireSameStitchSettings(const DeepShadowMap& map, const DeepShadowMap& fi
         requireSame(concat("the level ", l, " value step"), number(a.levels[l].valueStep),
                     number(b.levels[l].valueStep), p, q);
     }
+    requireSame("the tile codec", a.codec == TileCodec::Zstd ? "zstd" : "zlib", b.codec == TileCodec::Zstd ? "zstd" : "zlib",
+                p, q);
     requireSame("the zlib level", concat(a.codecLevel), concat(b.codecLevel), p, q);
     requireSame("the area light", number(a.areaLightRadius) + " at " + number(a.areaLightPlaneDepth),
                 number(b.areaLightRadius) + " at " + number(b.areaLightPlaneDepth), p, q);
@@ -427,6 +429,11 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
     if (info.levels.size() > 1 && info.levels[0].tolerance > 0.0)
         w.levelToleranceFactor = info.levels[1].tolerance / info.levels[0].tolerance;
     w.zlibLevel = report.zlibLevel;
+    if (info.codec == TileCodec::Zstd) {  // the inputs' compressor and level, as recorded
+        w.codec = TileCodec::Zstd;
+        w.zstdLevel = std::max(info.codecLevel, 0);
+        w.zlibLevel = options.zlibLevel.value_or(kDefaultZlibLevel);
+    }
     // The inputs' values are multiples of their levels' steps already: the
     // writer's rounding leaves them as they are.
     w.quantiseValues = info.levels.at(0).valueStep > 0.0;

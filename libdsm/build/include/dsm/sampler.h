@@ -67,6 +67,9 @@ struct BuildOptions {
     std::uint64_t seed = 1;
     SamplerMethod sampler = SamplerMethod::scanline;
     int zlibLevel = 6;
+    /// The tiles' compressor and, for zstd, its level (WriterOptions).
+    TileCodec codec = TileCodec::Zlib;
+    int zstdLevel = 19;
     /// Called now and then with the fraction done, from the calling thread.
     std::function<void(double)> progress;
     /// Receives the sample rays of each built pixel (x, y) before filtering:
