@@ -17,6 +17,7 @@ that agree bit for bit print the same text (tests/support/dump_map.cpp prints
 the same from libdsm's reader).
 """
 
+import math
 import struct
 import sys
 import zlib
@@ -134,7 +135,11 @@ def read_levels(data, h):
             offset, stored, raw, crc, vertices = struct.unpack_from("<QIIII", directory, d)
             min_z, max_z = struct.unpack_from("<2f", directory, d + 24)
             non_empty = struct.unpack_from("<I", directory, d + 32)[0]
+            check_directory_entry(directory, d, L, t, h, len(data), l)
             L.tiles.append((offset, stored, raw, crc, vertices, min_z, max_z, non_empty))
+        if (sum(t[4] for t in L.tiles), sum(t[7] for t in L.tiles), sum(t[1] for t in L.tiles)) != (
+                L.vertex_count, L.non_empty, L.stored_bytes):
+            raise FormatError("level %d: level totals do not match its tile directory" % l)
         levels.append(L)
         w, hh = -(-w // 2), -(-hh // 2)
     return levels
@@ -205,12 +210,67 @@ def unzigzag(u):
     return (u >> 1) ^ (-(u & 1) & 0xFFFFFFFF)
 
 
+def check_directory_entry(directory, d, L, t, h, file_size, l):
+    """Section 10's rules for one tile's directory entry."""
+    offset, stored, raw, crc, vertices, min_bits, max_bits, non_empty = struct.unpack_from("<QIIIIIII", directory, d)
+    min_z, max_z = struct.unpack_from("<2f", directory, d + 24)
+    tx, ty = t % L.tiles_x, t // L.tiles_x
+    where = "level %d tile %d,%d" % (l, tx, ty)
+    pixels = min(h.tile_size, L.width - tx * h.tile_size) * min(h.tile_size, L.height - ty * h.tile_size)
+    if stored == 0:
+        if (offset, raw, crc, vertices, min_bits, max_bits, non_empty) != (0, 0, 0, 0, 0, 0, 0):
+            raise FormatError("%s: empty tile with non-zero fields" % where)
+        return
+    if offset < h.header_size or offset + stored > file_size:
+        raise FormatError("%s: data does not fit in the file" % where)
+    if raw < stored:
+        raise FormatError("%s: stored size above raw size" % where)
+    if vertices == 0 or not 0 < non_empty <= pixels:
+        raise FormatError("%s: vertex or non-empty pixel count" % where)
+    if not (math.isfinite(min_z) and math.isfinite(max_z) and 0.0 <= min_z <= max_z):
+        raise FormatError("%s: depth range" % where)
+
+
+def check_pixels(decoded, h, tile, where):
+    """Section 10's rules for the pixels of one decoded tile, and the
+    directory's depth range and non-empty count against them."""
+    min_z, max_z, non_empty = tile[5], tile[6], tile[7]
+    seen_min, seen_max, seen = math.inf, -math.inf, 0
+    for p, (c, starts, z_bits, v_bits, counts) in enumerate(decoded):
+        n = len(z_bits)
+        if c > h.channels:
+            raise FormatError("%s pixel %d: RGB pixel in a monochrome map" % (where, p))
+        if len(starts) + 1 > h.max_layers or (len(starts) > 0 and len(starts) + 1 > n):
+            raise FormatError("%s pixel %d: layer count" % (where, p))
+        if len(starts) and (np.any(np.diff(starts.astype(np.int64)) <= 0) or starts[0] == 0 or starts[-1] >= n):
+            raise FormatError("%s pixel %d: layer starts" % (where, p))
+        if n == 0:
+            continue
+        z = z_bits.view(np.float32)
+        if not np.all(np.isfinite(z)) or np.any(z < 0) or np.any(np.diff(z) < 0):
+            raise FormatError("%s pixel %d: depths not finite, negative or decreasing" % (where, p))
+        v = v_bits.view(np.float32).reshape(n, c)
+        if not np.all(np.isfinite(v)) or np.any(v < 0) or np.any(v > 1):
+            raise FormatError("%s pixel %d: values outside [0, 1]" % (where, p))
+        rises = np.diff(v, axis=0) > 0
+        rises[np.asarray(starts, dtype=np.int64) - 1] = False  # a layer may start anywhere
+        if np.any(rises):
+            raise FormatError("%s pixel %d: values increasing within a layer" % (where, p))
+        seen += 1
+        seen_min, seen_max = min(seen_min, float(z[0])), max(seen_max, float(z[-1]))
+    if seen != non_empty or np.float32(seen_min) != np.float32(min_z) or np.float32(seen_max) != np.float32(max_z):
+        raise FormatError("%s: depth range or non-empty pixels differ from the directory's" % where)
+
+
 def decode_plain(raw, pixels, h):
     table = ((pixels * 6) + 3) & ~3
     cumulative = np.frombuffer(raw, dtype="<u4", count=pixels, offset=0).astype(np.int64)
     n = np.diff(np.concatenate(([0], cumulative)))
+    if np.any(np.diff(cumulative) < 0) or (pixels and cumulative[0] < 0):
+        raise FormatError("cumulative vertex counts decrease")
     flags = raw[4 * pixels : 5 * pixels]
     layers = raw[5 * pixels : 6 * pixels]
+    check_flags(flags)
     pos = table
     out = []
     for p in range(pixels):
@@ -282,6 +342,11 @@ def decode_depths_by_pixel(raw, pos, n):
     return depths, pos
 
 
+def check_flags(flags):
+    if any(f & ~PIXEL_RGB for f in flags):
+        raise FormatError("unknown pixel flags")
+
+
 def decode_coded(raw, pixels, h, step):
     mask = 0xFFFFFFFF
     n, pos = read_varints(raw, 0, pixels)
@@ -290,6 +355,7 @@ def decode_coded(raw, pixels, h, step):
     if len(flags) != pixels or len(layers) != pixels:
         raise FormatError("coded tile data ends early")
     pos += 2 * pixels
+    check_flags(flags)
     channels = [3 if f & PIXEL_RGB else 1 for f in flags]
     starts = []
     for p in range(pixels):
@@ -341,11 +407,13 @@ def read_map(path):
             hh = min(ts, L.height - ty * ts)
             if tile[1] == 0:
                 continue  # empty: every pixel fully lit
-            raw = inflate(data, tile, "level %d tile %d,%d" % (l, tx, ty), h.codec)
+            where = "level %d tile %d,%d" % (l, tx, ty)
+            raw = inflate(data, tile, where, h.codec)
             if h.required & CODED_TILES:
                 decoded = decode_coded(raw, w * hh, h, L.value_step)
             else:
                 decoded = decode_plain(raw, w * hh, h)
+            check_pixels(decoded, h, tile, where)
             for p, pixel in enumerate(decoded):
                 if len(pixel[2]):
                     grid[(tx * ts + p % w, ty * ts + p // w)] = pixel

@@ -204,6 +204,14 @@ TEST(FarmParts, StitchRefusesMissingAndMixedParts) {
     EXPECT_NE(message.find("part-0001.dsm"), std::string::npos) << message;
     EXPECT_FALSE(fs::exists(output));
 
+    // A part written with another tile codec is another build too.
+    dsm::BuildOptions zstd = smallOptions();
+    zstd.codec = dsm::TileCodec::Zstd;
+    EXPECT_FALSE(dsm::buildFarmPart(scene, zstd, grid, 1, parts).skipped);
+    message = errorOf([&] { dsm::stitchFarmParts(parts, output); });
+    EXPECT_NE(message.find("field 'codec' is zstd in"), std::string::npos) << message;
+    EXPECT_FALSE(fs::exists(output));
+
     // Rebuilt with the right seed, part 1 replaces the other build's.
     EXPECT_FALSE(dsm::buildFarmPart(scene, smallOptions(), grid, 1, parts).skipped);
     dsm::stitchFarmParts(parts, output);

@@ -129,6 +129,8 @@ FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& options, FarmG
             {"seed", std::to_string(options.seed)},
             {"sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"},
             {"zlib_level", std::to_string(options.zlibLevel)},
+            {"codec", options.codec == TileCodec::Zstd ? "zstd" : "zlib"},
+            {"zstd_level", std::to_string(options.zstdLevel)},
             {"grid", concat(grid.columns, "x", grid.rows)},
             {"library", libraryVersion()}};
 }
