@@ -1,5 +1,7 @@
 #include "embree_device.h"
 
+#include <limits>
+
 #include "dsm/error.h"
 #include "text.h"
 
@@ -42,6 +44,23 @@ void throwIfEmbreeFailed(RTCDevice device, std::string_view who, std::string_vie
     const std::string message = lastEmbreeMessage.empty() ? errorCodeName(code) : lastEmbreeMessage;
     lastEmbreeMessage.clear();
     throw Error(ErrorCode::internal, detail::concat(who, ": Embree failed ", doing, ": ", message));
+}
+
+RTCRay embreeRay(const Vec3& origin, const Vec3& direction, double tMax, double time) {
+    RTCRay ray{};
+    ray.org_x = static_cast<float>(origin[0]);
+    ray.org_y = static_cast<float>(origin[1]);
+    ray.org_z = static_cast<float>(origin[2]);
+    ray.dir_x = static_cast<float>(direction[0]);
+    ray.dir_y = static_cast<float>(direction[1]);
+    ray.dir_z = static_cast<float>(direction[2]);
+    ray.tnear = 0.0f;
+    ray.tfar = tMax >= std::numeric_limits<float>::max() ? std::numeric_limits<float>::infinity()
+                                                          : static_cast<float>(tMax);
+    ray.time = static_cast<float>(time);
+    ray.mask = ~0u;
+    ray.flags = 0;
+    return ray;
 }
 
 DSM_NAMESPACE_END

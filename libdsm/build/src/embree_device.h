@@ -20,6 +20,10 @@ DSM_TESTED_INTERNAL RTCDevice newEmbreeDevice(std::string_view who);
 /// when `device` (null: device creation) has an error pending.
 DSM_TESTED_INTERNAL void throwIfEmbreeFailed(RTCDevice device, std::string_view who, std::string_view doing);
 
+/// An Embree ray from `origin` along `direction` over [0, tMax] (tMax at or
+/// above the largest float: unbounded) at shutter time `time`, every mask bit.
+DSM_TESTED_INTERNAL RTCRay embreeRay(const Vec3& origin, const Vec3& direction, double tMax, double time);
+
 /// Releases a geometry on every path out of the code that fills it (attached
 /// geometries are held by the scene as well).
 struct OwnedGeometry {

@@ -261,17 +261,7 @@ void RayCaster::surfaceHits(const Vec3& origin, const Vec3& direction, double ti
     // well inside Embree's [0, infinity) whatever its float arithmetic.
     const Vec3 start = add(origin, scale(direction, t0 - s.pad / std::sqrt(dot(direction, direction))));
     RTCRayHit rayHit{};
-    RTCRay& ray = rayHit.ray;
-    ray.org_x = static_cast<float>(start[0]);
-    ray.org_y = static_cast<float>(start[1]);
-    ray.org_z = static_cast<float>(start[2]);
-    ray.dir_x = static_cast<float>(direction[0]);
-    ray.dir_y = static_cast<float>(direction[1]);
-    ray.dir_z = static_cast<float>(direction[2]);
-    ray.tnear = 0.0f;
-    ray.tfar = std::numeric_limits<float>::infinity();
-    ray.time = std::clamp(static_cast<float>(time), 0.0f, 1.0f);
-    ray.mask = ~0u;
+    rayHit.ray = embreeRay(start, direction, std::numeric_limits<double>::infinity(), std::clamp(time, 0.0, 1.0));
     rayHit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
     HitContext c;
     rtcInitIntersectContext(&c.embree);

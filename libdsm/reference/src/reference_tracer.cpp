@@ -439,23 +439,6 @@ void checkTime(double time, const char* what) {
                     detail::concat("reference tracer: ", what, ": time ", time, " is outside [0, 1]"));
 }
 
-RTCRay embreeRay(const Vec3& origin, const Vec3& direction, double tMax, double time) {
-    RTCRay ray{};
-    ray.org_x = static_cast<float>(origin[0]);
-    ray.org_y = static_cast<float>(origin[1]);
-    ray.org_z = static_cast<float>(origin[2]);
-    ray.dir_x = static_cast<float>(direction[0]);
-    ray.dir_y = static_cast<float>(direction[1]);
-    ray.dir_z = static_cast<float>(direction[2]);
-    ray.tnear = 0.0f;
-    ray.tfar = tMax >= std::numeric_limits<float>::max() ? std::numeric_limits<float>::infinity()
-                                                          : static_cast<float>(tMax);
-    ray.time = static_cast<float>(time);
-    ray.mask = ~0u;
-    ray.flags = 0;
-    return ray;
-}
-
 }  // namespace
 
 std::array<double, 3> ReferenceTracer::transmittance(const Vec3& from, const Vec3& to, double time) const {
