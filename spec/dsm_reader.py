@@ -131,12 +131,7 @@ def read_levels(data, h):
         directory = section(data, L.directory_offset, count * h.tile_entry_size, L.directory_crc, "directory")
         L.tiles = []
         for t in range(count):
-            d = t * h.tile_entry_size
-            offset, stored, raw, crc, vertices = struct.unpack_from("<QIIII", directory, d)
-            min_z, max_z = struct.unpack_from("<2f", directory, d + 24)
-            non_empty = struct.unpack_from("<I", directory, d + 32)[0]
-            check_directory_entry(directory, d, L, t, h, len(data), l)
-            L.tiles.append((offset, stored, raw, crc, vertices, min_z, max_z, non_empty))
+            L.tiles.append(read_directory_entry(directory, t * h.tile_entry_size, L, t, h, len(data), l))
         if (sum(t[4] for t in L.tiles), sum(t[7] for t in L.tiles), sum(t[1] for t in L.tiles)) != (
                 L.vertex_count, L.non_empty, L.stored_bytes):
             raise FormatError("level %d: level totals do not match its tile directory" % l)
@@ -210,8 +205,9 @@ def unzigzag(u):
     return (u >> 1) ^ (-(u & 1) & 0xFFFFFFFF)
 
 
-def check_directory_entry(directory, d, L, t, h, file_size, l):
-    """Section 10's rules for one tile's directory entry."""
+def read_directory_entry(directory, d, L, t, h, file_size, l):
+    """One tile's directory entry, checked by section 10's rules:
+    (offset, stored, raw, crc, vertices, min_z, max_z, non_empty)."""
     offset, stored, raw, crc, vertices, min_bits, max_bits, non_empty = struct.unpack_from("<QIIIIIII", directory, d)
     min_z, max_z = struct.unpack_from("<2f", directory, d + 24)
     tx, ty = t % L.tiles_x, t // L.tiles_x
@@ -220,7 +216,7 @@ def check_directory_entry(directory, d, L, t, h, file_size, l):
     if stored == 0:
         if (offset, raw, crc, vertices, min_bits, max_bits, non_empty) != (0, 0, 0, 0, 0, 0, 0):
             raise FormatError("%s: empty tile with non-zero fields" % where)
-        return
+        return (offset, stored, raw, crc, vertices, min_z, max_z, non_empty)
     if offset < h.header_size or offset + stored > file_size:
         raise FormatError("%s: data does not fit in the file" % where)
     if raw < stored:
@@ -229,6 +225,7 @@ def check_directory_entry(directory, d, L, t, h, file_size, l):
         raise FormatError("%s: vertex or non-empty pixel count" % where)
     if not (math.isfinite(min_z) and math.isfinite(max_z) and 0.0 <= min_z <= max_z):
         raise FormatError("%s: depth range" % where)
+    return (offset, stored, raw, crc, vertices, min_z, max_z, non_empty)
 
 
 def check_pixels(decoded, h, tile, where):

@@ -23,11 +23,17 @@ import subprocess
 import sys
 
 
+_readers = {}
+
+
 def load_reader(path):
-    spec = importlib.util.spec_from_file_location("dsm_reader", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    """The independent reader as a module, loaded once per worker process."""
+    if path not in _readers:
+        spec = importlib.util.spec_from_file_location("dsm_reader", path)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+        _readers[path] = module
+    return _readers[path]
 
 
 def collect(directories):
