@@ -98,6 +98,33 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double l
     return last - first + 1;
 }
 
+// The ray's progress along one raster axis of the quadtree walk's frame,
+// set up once per ray: where it is in each half of a node split at `middle`.
+struct RayAcrossAxis {
+    bool fixed;       // the ray (almost) does not move along this axis
+    float low, high;  // its span along the axis when fixed
+    float origin, inverseStep, slack;
+    int firstHalf;  // the half the ray is in before it crosses a middle
+
+    // The ray's parameters [a[i], b[i]] within half i of the stretch [ta, tb]
+    // (empty when a > b); returns where it enters the second half (-inf when fixed).
+    float split(float ta, float tb, float middle, float a[2], float b[2]) const {
+        constexpr float inf = std::numeric_limits<float>::infinity();
+        if (fixed) {
+            a[0] = a[1] = ta;
+            b[0] = low <= middle ? tb : -inf;
+            b[1] = high >= middle ? tb : -inf;
+            return -inf;
+        }
+        const float t = (middle - origin) * inverseStep;
+        a[firstHalf] = ta;
+        b[firstHalf] = std::min(tb, t + slack);
+        a[1 - firstHalf] = std::max(ta, t - slack);
+        b[1 - firstHalf] = tb;
+        return a[1 - firstHalf];
+    }
+};
+
 }  // namespace
 
 struct SoftShadowContext::Impl {
@@ -314,6 +341,8 @@ struct SoftShadowContext::Impl {
         const float inf = std::numeric_limits<float>::infinity();
         // The column (row) the ray is in before it crosses a node's middle.
         const int c0 = dx > 0.0f ? 0 : 1, r0 = dy > 0.0f ? 0 : 1;
+        const RayAcrossAxis acrossX{alongY, xLow, xHigh, ox, invDx, slackX, c0};
+        const RayAcrossAxis acrossY{alongX, yLow, yHigh, oy, invDy, slackY, r0};
 
         struct Node {
             float ta, tb;
@@ -326,29 +355,9 @@ struct SoftShadowContext::Impl {
         // [ta, tb], split at the middle (xm, ym) in the frame.
         const auto split = [&](float ta, float tb, float xm, float ym, std::uint32_t x, std::uint32_t y, int g) {
             float colA[2], colB[2], rowA[2], rowB[2];
-            float tx = -inf, ty = -inf;  // where the ray enters the second column (row)
-            if (alongY) {
-                colA[0] = colA[1] = ta;
-                colB[0] = xLow <= xm ? tb : -inf;
-                colB[1] = xHigh >= xm ? tb : -inf;
-            } else {
-                const float t = (xm - ox) * invDx;
-                colA[c0] = ta;
-                colB[c0] = std::min(tb, t + slackX);
-                colA[1 - c0] = tx = std::max(ta, t - slackX);
-                colB[1 - c0] = tb;
-            }
-            if (alongX) {
-                rowA[0] = rowA[1] = ta;
-                rowB[0] = yLow <= ym ? tb : -inf;
-                rowB[1] = yHigh >= ym ? tb : -inf;
-            } else {
-                const float t = (ym - oy) * invDy;
-                rowA[r0] = ta;
-                rowB[r0] = std::min(tb, t + slackY);
-                rowA[1 - r0] = ty = std::max(ta, t - slackY);
-                rowB[1 - r0] = tb;
-            }
+            // Where the ray enters the second column (row).
+            const float tx = acrossX.split(ta, tb, xm, colA, colB);
+            const float ty = acrossY.split(ta, tb, ym, rowA, rowB);
             if (xm >= W) colB[1] = -inf;  // beyond the map's edge
             if (ym >= H) rowB[1] = -inf;
             const auto push = [&](int i, int j) {
