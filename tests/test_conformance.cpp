@@ -102,15 +102,7 @@ void writeRichSample(const std::string& path) {
     o.areaLightRadius = 0.5;
     o.areaLightPlaneDepth = 1.0;
     o.metadata = R"({"sample":"rich"})";
-    dsm::MapWriter writer(path, o);
-    for (std::uint32_t ty = 0; ty < writer.tilesY(); ++ty)
-        for (std::uint32_t tx = 0; tx < writer.tilesX(); ++tx) {
-            std::vector<dsm::VisibilityFunction> pixels;
-            for (std::uint32_t y = 0; y < writer.tileHeight(ty); ++y)
-                for (std::uint32_t x = 0; x < writer.tileWidth(tx); ++x) pixels.push_back(richPixel(2 * tx + x, 2 * ty + y));
-            writer.writeTile(tx, ty, pixels);
-        }
-    writer.finish();
+    dsm::test::writeMap(path, o, dsm::test::makeImage(o.width, o.height, richPixel));
 }
 
 }  // namespace
