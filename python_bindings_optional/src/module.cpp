@@ -381,6 +381,7 @@ py::dict build(const std::string& sceneText, const std::string& baseDirectory, c
     d["output"] = outPath;
     d["wall_seconds"] = s.wallSeconds;
     d["sampling_seconds"] = s.samplingSeconds;
+    d["crossing_seconds"] = s.crossingSeconds;
     d["sweep_seconds"] = s.sweepSeconds;
     d["compression_seconds"] = s.compressionSeconds;
     d["writing_seconds"] = s.writingSeconds;

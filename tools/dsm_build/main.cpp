@@ -193,6 +193,7 @@ int main(int argc, char** argv) {
             nlohmann::json j = {{"output", output},
                                 {"wall_seconds", s.wallSeconds},
                                 {"sampling_seconds", s.samplingSeconds},
+                                {"crossing_seconds", s.crossingSeconds},
                                 {"sweep_seconds", s.sweepSeconds},
                                 {"compression_seconds", s.compressionSeconds},
                                 {"writing_seconds", s.writingSeconds},

@@ -407,6 +407,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             writer.writeTile(tx, ty, rowTiles[ty % 2][tx]);
             const TileStats& s = rowStats[ty % 2][tx];
             result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
+            result.crossingSeconds += s.castSeconds;
             result.sweepSeconds += s.timings.sweepSeconds;
             result.compressionSeconds += s.timings.compressionSeconds;
             result.samples += s.samples;

@@ -82,6 +82,7 @@ struct BuildOptions {
 
 struct BuildStats {
     double samplingSeconds = 0.0;     ///< ray casting and transmittance (summed over threads)
+    double crossingSeconds = 0.0;     ///< of samplingSeconds: finding what each sample crosses
     double sweepSeconds = 0.0;        ///< filtering by the sweep (summed over threads)
     double compressionSeconds = 0.0;  ///< L-infinity compression (summed over threads)
     double writingSeconds = 0.0;      ///< tile encoding, mip levels and I/O
