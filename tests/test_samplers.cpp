@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "map_fixtures.h"
+#include "light_rays.h"
 #include "ray_caster.h"
 #include "scanline_hider.h"
 #include "temp_dir.h"
@@ -144,6 +145,83 @@ TEST(ScanlineHider, FilesEachPrimitiveInTheTilesItReaches) {
     const dsm::LightCamera camera = dsm::lightCamera(scene.light);
     const dsm::ScanlineHider hider(caster.surfaces(), camera, 64, 64, 16, 0);
     EXPECT_EQ(hider.bucketEntries(), 1u + 16u);
+}
+
+// The hider skips the samples of a still hair segment that lie farther in
+// raster space from its projected axis than its ribbon can reach; that bound
+// must never skip a crossing the exact test finds. Samples placed where rays
+// pass segments just inside their half-width, anywhere along them up to their
+// ends, under a perspective and an orthographic light, must each get the
+// exact test's crossing of that segment.
+void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
+    const dsm::RayCaster caster(scene, dsm::RayCaster::Surfaces::none);
+    const dsm::ScenePrimitives& surfaces = caster.surfaces();
+    const std::vector<dsm::Primitive>& all = surfaces.all();
+    dsm::LightDescription light = scene.light;
+    light.width = light.height = size;
+    const dsm::LightCamera camera = dsm::lightCamera(light);
+    const dsm::detail::LightRayFrame frame = dsm::detail::lightRayFrame(camera, size, size);
+    constexpr std::uint32_t kTile = 16;
+    const dsm::ScanlineHider hider(surfaces, camera, size, size, kTile, 0);
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    const dsm::Vec3 toLight{camera.worldToLight[8], camera.worldToLight[9], camera.worldToLight[10]};
+    std::size_t edgeCrossings = 0;
+    for (int r = 0; r < 2000; ++r) {
+        const dsm::Primitive& p = all[rng() % all.size()];
+        if (p.kind != dsm::PrimitiveKind::Segment) continue;
+        const dsm::ScenePrimitives::Segment& seg = surfaces.segment(p);
+        const double along = r % 10 == 0 ? 0.0 : r % 10 == 1 ? 1.0 - 1e-12 : unit(rng);
+        dsm::Vec3 axis, point;
+        for (std::size_t a = 0; a < 3; ++a) axis[a] = seg.p1[a] - seg.p0[a];
+        for (std::size_t a = 0; a < 3; ++a) point[a] = seg.p0[a] + along * axis[a];
+        // Sideways from the axis, across the light's view: where the ribbon's edge shows.
+        dsm::Vec3 side{axis[1] * toLight[2] - axis[2] * toLight[1], axis[2] * toLight[0] - axis[0] * toLight[2],
+                       axis[0] * toLight[1] - axis[1] * toLight[0]};
+        const double sideLength = std::sqrt(side[0] * side[0] + side[1] * side[1] + side[2] * side[2]);
+        if (!(sideLength > 0.0)) continue;
+        const double gap = (seg.r0 + along * (seg.r1 - seg.r0)) * (r % 2 ? 0.999 : -0.999);
+        for (std::size_t a = 0; a < 3; ++a) point[a] += side[a] / sideLength * gap;
+        double rx, ry, depth;
+        if (!camera.lightToRaster(camera.worldToLightSpace(point), int(size), int(size), rx, ry, depth)) continue;
+        if (!(rx >= 0.0 && rx < size && ry >= 0.0 && ry < size)) continue;
+        const auto px = static_cast<std::uint32_t>(rx), py = static_cast<std::uint32_t>(ry);
+        dsm::HiderSample sample;
+        sample.x = rx;
+        sample.y = ry;
+        frame.ray(rx, ry, sample.origin, sample.direction);
+        std::vector<dsm::RaySurfaceHit> exact;
+        surfaces.intersect(p, sample.origin, sample.direction, 0.0, camera.nearPlane, exact);
+        if (exact.empty()) continue;  // rounding put the ray just outside
+        ++edgeCrossings;
+        std::vector<std::vector<dsm::RaySurfaceHit>> hits;
+        hider.tileHits(px / kTile, py / kTile, {px, py, px + 1, py + 1}, 1, std::span(&sample, 1), camera.nearPlane,
+                       hits);
+        const bool present = std::any_of(hits[0].begin(), hits[0].end(), [&](const dsm::RaySurfaceHit& h) {
+            return h.t == exact[0].t && h.object == exact[0].object;
+        });
+        ASSERT_TRUE(present) << "sample " << r << " at " << rx << ", " << ry;
+    }
+    EXPECT_GT(edgeCrossings, 1000u);
+}
+
+TEST(ScanlineHider, FindsHairCrossingsAtTheRibbonsEdges) {
+    const TempDir dir;
+    const dsm::Scene spot = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");
+    {
+        SCOPED_TRACE("perspective");
+        expectHiderFindsRibbonEdges(spot, 512);
+    }
+    dsm::Scene distant = dsm::parseScene(R"({
+      "light": {"type": "distant", "position": [1.5, 5, 2], "direction": [-1.5, -4.4, -2], "up": [0, 0, -1],
+                "extent": 1.2, "resolution": [64, 64]},
+      "objects": []})",
+                                         dir.path().string(), "distant.json");
+    distant.objects = spot.objects;
+    {
+        SCOPED_TRACE("orthographic");
+        expectHiderFindsRibbonEdges(distant, 512);
+    }
 }
 
 // Rays aimed into random primitives' boxes, from inside them, from near

@@ -25,7 +25,62 @@ bool tileRange(double lo, double hi, std::uint32_t size, std::uint32_t reach, st
     return true;
 }
 
+// How far, in raster units, a sample may lie from the projected axis of a
+// still hair segment whose ray still passes the ribbon. A crossing point H lies
+// within the half-width r of an axis point Q, so both lie in the segment's box
+// (padded by its half-widths), where light depth z >= zMin and |x/z| <= uMax,
+// |y/z| <= vMax. Along the way from Q to H, with light-space rows of norms
+// n = (nx, ny, nz), d(x/z) = (dx - (x/z) dz) / z moves at most
+// (nx + uMax nz) |dH| / zMin (perspective; nx |dH| orthographic), likewise y.
+// The sample is H's projection and Q's projection lies on the projected axis,
+// so the sample's distance from that axis is at most r times the raster
+// stretch. The bound is widened by 1 % so rounding never rejects a crossing
+// the exact test would find; the exact test still decides.
+double rasterStretch(const LightCamera& camera, std::uint32_t width, std::uint32_t height, double zMin, double uMax,
+                     double vMax) {
+    const auto& m = camera.worldToLight;
+    const auto rowNorm = [&](int r) {
+        return std::sqrt(m[4 * r] * m[4 * r] + m[4 * r + 1] * m[4 * r + 1] + m[4 * r + 2] * m[4 * r + 2]);
+    };
+    const auto& w = camera.screenWindow;
+    const double ax = width / std::abs(w[1] - w[0]), ay = height / std::abs(w[3] - w[2]);
+    double sx = ax * rowNorm(0), sy = ay * rowNorm(1);
+    if (camera.projection == Projection::Perspective) {
+        sx = ax * (rowNorm(0) + uMax * rowNorm(2)) / zMin;
+        sy = ay * (rowNorm(1) + vMax * rowNorm(2)) / zMin;
+    }
+    return 1.01 * std::sqrt(sx * sx + sy * sy);
+}
+
 }  // namespace
+
+// Narrows [x0, x1] to the pixels of row y (samples with y <= sample y < y + 1)
+// that a footprint reaches: those within `radius` of the part of the axis
+// whose y lies within `radius` of the row. False when it misses the row.
+bool ScanlineHider::footprintRow(const SegmentFootprint& f, double radius, std::uint32_t y, std::uint32_t& x0,
+                                 std::uint32_t& x1) {
+    const double slack = 1e-9 * (1.0 + std::abs(f.x0) + std::abs(f.y0));
+    const double lo = double(y) - radius - slack, hi = double(y) + 1.0 + radius + slack;
+    double s0 = 0.0, s1 = 1.0;
+    if (f.dy != 0.0) {
+        s0 = (lo - f.y0) / f.dy;
+        s1 = (hi - f.y0) / f.dy;
+        if (s0 > s1) std::swap(s0, s1);
+        s0 = std::max(s0, 0.0);
+        s1 = std::min(s1, 1.0);
+        if (s0 > s1) return false;
+    } else if (f.y0 < lo || f.y0 > hi) {
+        return false;
+    }
+    double xa = f.x0 + s0 * f.dx, xb = f.x0 + s1 * f.dx;
+    if (xa > xb) std::swap(xa, xb);
+    const double first = std::max(std::floor(xa - radius - slack), double(x0));
+    const double last = std::min(std::floor(xb + radius + slack), double(x1));
+    if (first > last) return false;
+    x0 = static_cast<std::uint32_t>(first);
+    x1 = static_cast<std::uint32_t>(last);
+    return true;
+}
 
 ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera& camera, std::uint32_t width,
                              std::uint32_t height, std::uint32_t tileSize, std::uint32_t reach)
@@ -34,6 +89,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
       tilesY_((height + tileSize - 1) / tileSize) {
     const std::vector<Primitive>& primitives = surfaces.all();
     raster_.resize(primitives.size());
+    footprints_.resize(primitives.size());
     // Per primitive, its tile rectangle (or none): counted first, then filed.
     struct TileRect {
         std::uint32_t x0, y0, x1, y1;
@@ -45,11 +101,16 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         const Bounds3 b = surfaces.bounds(primitives[i]);
         RasterBounds r{kInf, kInf, -kInf, -kInf};
         bool inFront = false, behindLight = false;
+        double zMin = kInf, uMax = 0.0, vMax = 0.0;  // over the box's corners (see rasterStretch)
         for (int corner = 0; corner < 8; ++corner) {
             const Vec3 world{(corner & 1) ? b.hi[0] : b.lo[0], (corner & 2) ? b.hi[1] : b.lo[1],
                              (corner & 4) ? b.hi[2] : b.lo[2]};
             const std::array<double, 3> light = camera.worldToLightSpace(world);
             if (light[2] > camera.nearPlane) inFront = true;
+            zMin = std::min(zMin, light[2]);
+            const double depth = camera.projection == Projection::Perspective ? light[2] : 1.0;
+            uMax = std::max(uMax, std::abs(light[0] / depth));
+            vMax = std::max(vMax, std::abs(light[1] / depth));
             double rx, ry, z;
             if (!camera.lightToRaster(light, static_cast<int>(width), static_cast<int>(height), rx, ry, z)) {
                 behindLight = true;
@@ -72,6 +133,25 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         if (std::isfinite(r.x1)) r.x1 += slack(r.x1);
         if (std::isfinite(r.y1)) r.y1 += slack(r.y1);
         raster_[i] = r;
+        const Primitive& p = primitives[i];
+        if (p.kind == PrimitiveKind::Segment && !behindLight && zMin > 0.0 && surfaces.motion(p.object) == Vec3{}) {
+            const ScenePrimitives::Segment& s = surfaces.segment(p);
+            double x0, y0, x1, y1, z;
+            const double stretch = rasterStretch(camera, width, height, zMin, uMax, vMax);
+            if (camera.lightToRaster(camera.worldToLightSpace(s.p0), int(width), int(height), x0, y0, z) &&
+                camera.lightToRaster(camera.worldToLightSpace(s.p1), int(width), int(height), x1, y1, z) &&
+                std::isfinite(stretch)) {
+                SegmentFootprint& f = footprints_[i];
+                f.x0 = x0;
+                f.y0 = y0;
+                f.dx = x1 - x0;
+                f.dy = y1 - y0;
+                const double length2 = f.dx * f.dx + f.dy * f.dy;
+                f.invLength2 = length2 > 0.0 ? 1.0 / length2 : 0.0;
+                const double radius = std::max(s.r0, s.r1) * stretch + 1e-9 * (1.0 + std::abs(x0) + std::abs(y0));
+                f.radius2 = radius * radius;
+            }
+        }
         if (!tileRange(r.x0, r.x1, tileSize, reach, tilesX_, t.x0, t.x1) ||
             !tileRange(r.y0, r.y1, tileSize, reach, tilesY_, t.y0, t.y1))
             continue;
@@ -109,6 +189,7 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         const std::uint32_t index = bucketPrimitives_[e];
         const RasterBounds& b = raster_[index];
         const Primitive& primitive = primitives[index];
+        const SegmentFootprint& f = footprints_[index];
         // The sample pixels under the bounds (a sample of pixel p lies in
         // [p, p + 1)), clipped to the tile's.
         const double px0 = std::max(std::floor(b.x0), static_cast<double>(pixels[0]));
@@ -118,15 +199,26 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         if (px0 > px1 || py0 > py1) continue;
         const auto x0 = static_cast<std::uint32_t>(px0), x1 = static_cast<std::uint32_t>(px1);
         const auto y0 = static_cast<std::uint32_t>(py0), y1 = static_cast<std::uint32_t>(py1);
-        for (std::uint32_t y = y0; y <= y1; ++y)
-            for (std::uint32_t x = x0; x <= x1; ++x) {
+        const double radius = f.radius2 >= 0.0 ? std::sqrt(f.radius2) : 0.0;
+        for (std::uint32_t y = y0; y <= y1; ++y) {
+            std::uint32_t rowX0 = x0, rowX1 = x1;
+            if (f.radius2 >= 0.0 && !footprintRow(f, radius, y, rowX0, rowX1)) continue;
+            for (std::uint32_t x = rowX0; x <= rowX1; ++x) {
                 const std::size_t first = (std::size_t(y - pixels[1]) * sw + (x - pixels[0])) * spp;
                 for (std::size_t k = first; k < first + spp; ++k) {
                     const HiderSample& s = samples[k];
                     if (s.x < b.x0 || s.x > b.x1 || s.y < b.y0 || s.y > b.y1) continue;
+                    if (f.radius2 >= 0.0) {
+                        // Far from a still ribbon's projected axis: no crossing.
+                        const double ex = s.x - f.x0, ey = s.y - f.y0;
+                        const double along = std::clamp((ex * f.dx + ey * f.dy) * f.invLength2, 0.0, 1.0);
+                        const double gx = ex - along * f.dx, gy = ey - along * f.dy;
+                        if (gx * gx + gy * gy > f.radius2) continue;
+                    }
                     surfaces_.intersect(primitive, s.origin, s.direction, s.time, tMin, hits[k]);
                 }
             }
+        }
     }
 }
 

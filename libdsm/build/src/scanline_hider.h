@@ -54,10 +54,21 @@ private:
     struct RasterBounds {
         double x0, y0, x1, y1;
     };
+    /// A still hair segment's axis in raster space, P(s) = (x0, y0) + s (dx, dy)
+    /// for s in [0, 1], and the squared raster distance from it beyond which
+    /// no sample's ray can pass the ribbon (radius2 < 0: no such bound, the
+    /// exact test decides alone).
+    struct SegmentFootprint {
+        double x0 = 0.0, y0 = 0.0, dx = 0.0, dy = 0.0, invLength2 = 0.0, radius2 = -1.0;
+    };
+
+    static bool footprintRow(const SegmentFootprint& f, double radius, std::uint32_t y, std::uint32_t& x0,
+                             std::uint32_t& x1);
 
     const ScenePrimitives& surfaces_;
     std::uint32_t tilesX_ = 0, tilesY_ = 0;
     std::vector<RasterBounds> raster_;           // per primitive
+    std::vector<SegmentFootprint> footprints_;   // per primitive
     std::vector<std::size_t> bucketStart_;       // per tile, and one past the last
     std::vector<std::uint32_t> bucketPrimitives_;
 };
