@@ -227,8 +227,12 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     compression.keepCounts = counts;
     compression.maxLayers = options.mtsmLayers;
 
+    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::optional<ScanlineHider> hider;
-    if (scanline) hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach));
+    if (scanline)
+        arena.execute([&] {
+            hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach));
+        });
 
     tbb::enumerable_thread_specific<TileWorkspace> workspaces([&] { return TileWorkspace(compression); });
 
@@ -391,7 +395,6 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     BuildStats result;
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
-    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     // Two rows of tiles: the writer takes one (in the arena, as one more task)
     // while the workers build the next. Tiles reach the writer in the same
     // order as without the overlap, so the file is the same.

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 DSM_NAMESPACE_BEGIN
 
 namespace {
@@ -96,8 +99,9 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         bool any;
     };
     std::vector<TileRect> rects(primitives.size());
-    std::vector<std::size_t> counts(std::size_t(tilesX_) * tilesY_ + 1, 0);
-    for (std::size_t i = 0; i < primitives.size(); ++i) {
+    // Each primitive's raster bounds, footprint and tile rectangle, in
+    // parallel (each writes only its own entries, so any split gives the same).
+    auto place = [&](std::size_t i) {
         const Bounds3 b = surfaces.bounds(primitives[i]);
         RasterBounds r{kInf, kInf, -kInf, -kInf};
         bool inFront = false, behindLight = false;
@@ -125,7 +129,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         t.any = false;
         // Every point of the primitive lies at depth <= near: no crossing
         // has t > near. (The light-space box of the corners bounds it.)
-        if (!inFront) continue;
+        if (!inFront) return;
         if (behindLight) r = {-kInf, -kInf, kInf, kInf};
         const auto slack = [](double v) { return kRasterSlack * std::max(1.0, std::abs(v)); };
         if (std::isfinite(r.x0)) r.x0 -= slack(r.x0);
@@ -152,10 +156,16 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
                 f.radius2 = radius * radius;
             }
         }
-        if (!tileRange(r.x0, r.x1, tileSize, reach, tilesX_, t.x0, t.x1) ||
-            !tileRange(r.y0, r.y1, tileSize, reach, tilesY_, t.y0, t.y1))
-            continue;
-        t.any = true;
+        t.any = tileRange(r.x0, r.x1, tileSize, reach, tilesX_, t.x0, t.x1) &&
+                tileRange(r.y0, r.y1, tileSize, reach, tilesY_, t.y0, t.y1);
+    };
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, primitives.size(), 1024),
+                      [&](const tbb::blocked_range<std::size_t>& range) {
+                          for (std::size_t i = range.begin(); i != range.end(); ++i) place(i);
+                      });
+    std::vector<std::size_t> counts(std::size_t(tilesX_) * tilesY_ + 1, 0);
+    for (const TileRect& t : rects) {
+        if (!t.any) continue;
         for (std::uint32_t ty = t.y0; ty <= t.y1; ++ty)
             for (std::uint32_t tx = t.x0; tx <= t.x1; ++tx) ++counts[std::size_t(ty) * tilesX_ + tx];
     }

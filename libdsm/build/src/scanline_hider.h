@@ -33,6 +33,7 @@ public:
     /// beyond a tile its samples lie (the filter's reach). Primitives wholly
     /// at or before the near plane are left out (they cannot be crossed);
     /// one that reaches behind a perspective light goes into every tile.
+    /// Runs in parallel in the calling thread's task arena.
     ScanlineHider(const ScenePrimitives& surfaces, const LightCamera& camera, std::uint32_t width,
                   std::uint32_t height, std::uint32_t tileSize, std::uint32_t reach);
 

@@ -127,7 +127,7 @@ Bounds3 ScenePrimitives::boundsAt(const Primitive& p, double time) const {
 Bounds3 ScenePrimitives::bounds(const Primitive& p) const {
     // Cover the whole shutter: the box at t = 0 and at t = 1.
     Bounds3 b = boundsAt(p, 0.0);
-    b.grow(boundsAt(p, 1.0));
+    if (motion_[p.object] != Vec3{0.0, 0.0, 0.0}) b.grow(boundsAt(p, 1.0));
     return b;
 }
 
