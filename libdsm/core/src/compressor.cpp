@@ -168,16 +168,25 @@ public:
                 target[c] = ((Double2{value, value} + halfWidth) - origin[c]) * negateLower;
                 // lane 0: top * hiDen < hiNum * dz; lane 1: bottom * loDen > loNum * dz
                 product[c] = w[c].num * dz2;
-                moves |= laneMask(target[c] * w[c].den < product[c]);
+                moves |= laneMask(target[c] * w[c].den < product[c]) << (2 * c);
                 aboveZero &= w[c].endLimit <= product[c][0];
             });
             if (moves != 0) {
                 SlopeWindow narrowed[C];
                 bool feasible = true;
                 forEachChannel<C>([&](int c) {
-                    const Mask2 moved = target[c] * w[c].den < product[c];
-                    narrowed[c].num = moved ? target[c] : w[c].num;
-                    narrowed[c].den = moved ? dz2 : w[c].den;
+                    // Branches, not selects: on smooth input nearly every vertex moves
+                    // the same bound, and a select would chain each vertex's
+                    // comparison to the previous one's result.
+                    narrowed[c] = w[c];
+                    if (moves & (1 << (2 * c))) {
+                        narrowed[c].num[0] = target[c][0];
+                        narrowed[c].den[0] = dz;
+                    }
+                    if (moves & (2 << (2 * c))) {
+                        narrowed[c].num[1] = target[c][1];
+                        narrowed[c].den[1] = dz;
+                    }
                     feasible &= narrowed[c].feasible(originV_[c], dz);
                 });
                 if (!feasible) break;
