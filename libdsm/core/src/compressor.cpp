@@ -107,8 +107,14 @@ public:
             originStored_ = false;
             originIsStep_ = false;
         }
-        if (open_ && extendRun<C>(&z, v, &count, 1, band) == 1) return;
+        if (open_ && extendOne<C>(z, v, count, band)) return;
         pushBeyond<C>(z, v, count, band);
+    }
+
+    // extendRun() of one vertex, inlined: the per-vertex push() path.
+    template <int C>
+    [[gnu::flatten]] bool extendOne(float z, const double* v, std::uint32_t count, double band) {
+        return extendRun<C, true>(&z, v, &count, 1, band) == 1;
     }
 
     // push() of a vertex that does not extend the open segment (if any).
@@ -175,17 +181,24 @@ public:
                 SlopeWindow narrowed[C];
                 bool feasible = true;
                 forEachChannel<C>([&](int c) {
-                    // Branches, not selects: on smooth input nearly every vertex moves
-                    // the same bound, and a select would chain each vertex's
-                    // comparison to the previous one's result.
-                    narrowed[c] = w[c];
-                    if (moves & (1 << (2 * c))) {
-                        narrowed[c].num[0] = target[c][0];
-                        narrowed[c].den[0] = dz;
-                    }
-                    if (moves & (2 << (2 * c))) {
-                        narrowed[c].num[1] = target[c][1];
-                        narrowed[c].den[1] = dz;
+                    // One channel: branches, not selects; on smooth input nearly every
+                    // vertex moves the same bound, and a select would chain each
+                    // vertex's comparison to the previous one's result. Three: selects,
+                    // six bounds make too many branches.
+                    if constexpr (C == 1) {
+                        narrowed[c] = w[c];
+                        if (moves & 1) {
+                            narrowed[c].num[0] = target[c][0];
+                            narrowed[c].den[0] = dz;
+                        }
+                        if (moves & 2) {
+                            narrowed[c].num[1] = target[c][1];
+                            narrowed[c].den[1] = dz;
+                        }
+                    } else {
+                        const Mask2 moved = target[c] * w[c].den < product[c];
+                        narrowed[c].num = moved ? target[c] : w[c].num;
+                        narrowed[c].den = moved ? dz2 : w[c].den;
                     }
                     feasible &= narrowed[c].feasible(originV_[c], dz);
                 });
