@@ -59,8 +59,11 @@ struct SlopeWindow {
     Double2 num, den;
     // What hiNum * dz must reach for the segment's end dz beyond the origin to
     // stay at or above 0 (-origin * hiDen), or +inf (never reached) when the
-    // window is inconsistent; kept by limitEnd() for the run loop.
-    double endLimit;
+    // window is inconsistent; kept by limitEnd() for the run loop. In both
+    // lanes, so that the window is three whole registers: a lone double would
+    // be copied as half a register and read back as a whole one, which the
+    // processor cannot forward from the store (a stall on every push()).
+    Double2 endLimit;
 
     double lo() const { return -num[1] / den[1]; }
     double hi() const { return num[0] / den[0]; }
@@ -73,7 +76,8 @@ struct SlopeWindow {
     bool feasible(double origin, double dz) const { return consistent() & (-origin * den[0] <= num[0] * dz); }
 
     void limitEnd(double origin) {
-        endLimit = consistent() ? -origin * den[0] : std::numeric_limits<double>::infinity();
+        const double limit = consistent() ? -origin * den[0] : std::numeric_limits<double>::infinity();
+        endLimit = Double2{limit, limit};
     }
 };
 
@@ -149,6 +153,10 @@ public:
         return counts ? extendRun<C, true>(z, v, counts, n, band) : extendRun<C, false>(z, v, counts, n, band);
     }
 
+    // A vertex that moves bounds updates them by branches for one channel (on
+    // smooth input nearly every vertex moves the same bound, and a select
+    // would chain each vertex's comparison to the previous one's result) and
+    // by selects for RGB (six bounds make too many branches to predict).
     template <int C, bool withCounts, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         SlopeWindow w[C];
@@ -175,16 +183,12 @@ public:
                 // lane 0: top * hiDen < hiNum * dz; lane 1: bottom * loDen > loNum * dz
                 product[c] = w[c].num * dz2;
                 moves |= laneMask(target[c] * w[c].den < product[c]) << (2 * c);
-                aboveZero &= w[c].endLimit <= product[c][0];
+                aboveZero &= w[c].endLimit[0] <= product[c][0];
             });
             if (moves != 0) {
                 SlopeWindow narrowed[C];
                 bool feasible = true;
                 forEachChannel<C>([&](int c) {
-                    // One channel: branches, not selects; on smooth input nearly every
-                    // vertex moves the same bound, and a select would chain each
-                    // vertex's comparison to the previous one's result. Three: selects,
-                    // six bounds make too many branches.
                     if constexpr (C == 1) {
                         narrowed[c] = w[c];
                         if (moves & 1) {
