@@ -144,8 +144,8 @@ public:
     // (slope >= -origin / dz; V <= 1 follows from not rising). The window
     // lives in registers through the loop: this is the per-vertex work.
     //
-    // The updates are branches taken only by the vertices that move a bound
-    // (about a third on a hair pixel); for the others only the end-above-0
+    // Only the vertices that move a bound (about a third on a hair pixel)
+    // narrow and check the window; for the others only the end-above-0
     // condition can change: one product already made and one comparison.
     template <int C, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
