@@ -2,7 +2,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <utility>
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
 
 #include "dsm/error.h"
 #include "text.h"
@@ -29,14 +34,51 @@ inline void forEachChannel(F&& f) {
     [&]<int... c>(std::integer_sequence<int, c...>) { (f(c), ...); }(std::make_integer_sequence<int, C>{});
 }
 
+// Two doubles in one SIMD register (SSE2 on x86-64, NEON on AArch64), and the
+// lane mask a comparison of two of them gives.
+using Double2 = double __attribute__((vector_size(16)));
+using Mask2 = std::int64_t __attribute__((vector_size(16)));
+
+// Bit l set when lane l of a comparison is true.
+inline int laneMask(Mask2 m) {
+#ifdef __SSE2__
+    return _mm_movemask_pd(reinterpret_cast<__m128d>(m));
+#else
+    return static_cast<int>((m[0] & 1) | (m[1] & 2));
+#endif
+}
+
 // A range of slopes lo <= m <= hi of lines from a segment origin, each bound a
 // numerator over a positive denominator (a depth difference), so that a new
-// bound is compared by cross products instead of divisions.
+// bound is compared by cross products instead of divisions. The two bounds
+// share one two-lane register, the lower one negated: num = {hiNum, -loNum},
+// den = {hiDen, loDen}; "a vertex lowers the top" and "it raises the bottom"
+// are then one lane comparison each, and since negation is exact every
+// product and comparison is the one of the bound it stands for.
 struct SlopeWindow {
-    double loNum, loDen, hiNum, hiDen;
+    Double2 num, den;
+    // What hiNum * dz must reach for the segment's end dz beyond the origin to
+    // stay at or above 0 (-origin * hiDen), or +inf (never reached) when the
+    // window is inconsistent; kept by limitEnd() for the run loop. In both
+    // lanes, so that the window is three whole registers: a lone double would
+    // be copied as half a register and read back as a whole one, which the
+    // processor cannot forward from the store (a stall on every push()).
+    Double2 endLimit;
 
-    double lo() const { return loNum / loDen; }
-    double hi() const { return hiNum / hiDen; }
+    double lo() const { return -num[1] / den[1]; }
+    double hi() const { return num[0] / den[0]; }
+
+    // lo <= hi and lo <= 0: the conditions that do not depend on the end.
+    bool consistent() const { return (-num[1] * den[0] <= num[0] * den[1]) & (-num[1] <= 0.0); }
+
+    // Whether a feasible slope is left for a segment ending dz beyond an
+    // origin at V = origin: max(lo, -origin / dz) <= min(hi, 0).
+    bool feasible(double origin, double dz) const { return consistent() & (-origin * den[0] <= num[0] * dz); }
+
+    void limitEnd(double origin) {
+        const double limit = consistent() ? -origin * den[0] : std::numeric_limits<double>::infinity();
+        endLimit = Double2{limit, limit};
+    }
 };
 
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
@@ -55,6 +97,7 @@ public:
           out_(channels, keepCounts) {}
 
     int channels() const { return channels_; }
+    bool segmentOpen() const { return open_; }
     // The half-width of the target windows for exact input.
     double window() const { return band_; }
 
@@ -68,10 +111,20 @@ public:
             originStored_ = false;
             originIsStep_ = false;
         }
-        if (open_) {
-            if (extendRun<C>(&z, v, &count, 1, band) == 1) return;
-            closeSegment<C>();
-        }
+        if (open_ && extendOne<C>(z, v, count, band)) return;
+        pushBeyond<C>(z, v, count, band);
+    }
+
+    // extendRun() of one vertex, inlined: the per-vertex push() path.
+    template <int C>
+    [[gnu::flatten]] bool extendOne(float z, const double* v, std::uint32_t count, double band) {
+        return extendRun<C, true>(&z, v, &count, 1, band) == 1;
+    }
+
+    // push() of a vertex that does not extend the open segment (if any).
+    template <int C>
+    void pushBeyond(float z, const double* v, std::uint32_t count, double band) {
+        if (open_) closeSegment<C>();
         if (z == originZ_) {
             absorbAtOrigin<C>(v, count, band);
             return;
@@ -89,49 +142,81 @@ public:
     // the feasible slopes are those of it that also keep the output from
     // rising (slope <= 0) and from going below 0 at the segment's end
     // (slope >= -origin / dz; V <= 1 follows from not rising). The window
-    // lives in locals through the loop: this is the per-vertex work.
+    // lives in registers through the loop: this is the per-vertex work.
+    //
+    // Only the vertices that move a bound (about a third on a hair pixel)
+    // narrow and check the window; for the others only the end-above-0
+    // condition can change: one product already made and one comparison.
     template <int C, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if (!open_) return 0;
-        double loNum[C], loDen[C], hiNum[C], hiDen[C], origin[C];
+        return counts ? extendRun<C, true>(z, v, counts, n, band) : extendRun<C, false>(z, v, counts, n, band);
+    }
+
+    // A vertex that moves bounds updates them by branches for one channel (on
+    // smooth input nearly every vertex moves the same bound, and a select
+    // would chain each vertex's comparison to the previous one's result) and
+    // by selects for RGB (six bounds make too many branches to predict).
+    template <int C, bool withCounts, typename T>
+    std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+        SlopeWindow w[C];
+        Double2 origin[C];
         forEachChannel<C>([&](int c) {
-            loNum[c] = window_[c].loNum;
-            loDen[c] = window_[c].loDen;
-            hiNum[c] = window_[c].hiNum;
-            hiDen[c] = window_[c].hiDen;
-            origin[c] = originV_[c];
+            w[c] = window_[c];
+            origin[c] = Double2{originV_[c], originV_[c]};
         });
+        const Double2 halfWidth = {band, -band};
+        const Double2 negateLower = {1.0, -1.0};
         const double originZ = originZ_;
         std::uint64_t count = 0;
         std::size_t i = 0;
         for (; i < n; ++i) {
             const double dz = static_cast<double>(z[i]) - originZ;  // > 0 while a segment is open
-            double newLoNum[C], newLoDen[C], newHiNum[C], newHiDen[C];
-            bool feasible = true;
+            const Double2 dz2 = {dz, dz};
+            Double2 target[C], product[C];
+            int moves = 0;
+            bool aboveZero = true;
             forEachChannel<C>([&](int c) {
                 const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
-                const double top = value + band - origin[c];
-                const double bottom = value - band - origin[c];
-                const bool lowerTop = top * hiDen[c] < hiNum[c] * dz;
-                newHiNum[c] = lowerTop ? top : hiNum[c];
-                newHiDen[c] = lowerTop ? dz : hiDen[c];
-                const bool raiseBottom = bottom * loDen[c] > loNum[c] * dz;
-                newLoNum[c] = raiseBottom ? bottom : loNum[c];
-                newLoDen[c] = raiseBottom ? dz : loDen[c];
-                // max(lo, -origin / dz) <= min(hi, 0)
-                feasible &= (newLoNum[c] * newHiDen[c] <= newHiNum[c] * newLoDen[c]) & (newLoNum[c] <= 0.0) &
-                            (-origin[c] * newHiDen[c] <= newHiNum[c] * dz);
+                // {top, -bottom}: top = value + band - origin, bottom = value - band - origin
+                target[c] = ((Double2{value, value} + halfWidth) - origin[c]) * negateLower;
+                // lane 0: top * hiDen < hiNum * dz; lane 1: bottom * loDen > loNum * dz
+                product[c] = w[c].num * dz2;
+                moves |= laneMask(target[c] * w[c].den < product[c]) << (2 * c);
+                aboveZero &= w[c].endLimit[0] <= product[c][0];
             });
-            if (!feasible) break;
-            forEachChannel<C>([&](int c) {
-                loNum[c] = newLoNum[c];
-                loDen[c] = newLoDen[c];
-                hiNum[c] = newHiNum[c];
-                hiDen[c] = newHiDen[c];
-            });
-            if (counts) count += counts[i];
+            if (moves != 0) {
+                SlopeWindow narrowed[C];
+                bool feasible = true;
+                forEachChannel<C>([&](int c) {
+                    if constexpr (C == 1) {
+                        narrowed[c] = w[c];
+                        if (moves & 1) {
+                            narrowed[c].num[0] = target[c][0];
+                            narrowed[c].den[0] = dz;
+                        }
+                        if (moves & 2) {
+                            narrowed[c].num[1] = target[c][1];
+                            narrowed[c].den[1] = dz;
+                        }
+                    } else {
+                        const Mask2 moved = target[c] * w[c].den < product[c];
+                        narrowed[c].num = moved ? target[c] : w[c].num;
+                        narrowed[c].den = moved ? dz2 : w[c].den;
+                    }
+                    feasible &= narrowed[c].feasible(originV_[c], dz);
+                });
+                if (!feasible) break;
+                forEachChannel<C>([&](int c) {
+                    w[c] = narrowed[c];
+                    w[c].limitEnd(originV_[c]);
+                });
+            } else if (!aboveZero) {
+                break;
+            }
+            if constexpr (withCounts) count += counts[i];
         }
-        forEachChannel<C>([&](int c) { window_[c] = {loNum[c], loDen[c], hiNum[c], hiDen[c]}; });
+        forEachChannel<C>([&](int c) { window_[c] = w[c]; });
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
@@ -189,8 +274,11 @@ private:
     template <int C>
     void open(float z, const double* v, double band) {
         const double dz = static_cast<double>(z) - originZ_;
-        for (int c = 0; c < C; ++c)
-            window_[c] = {v[c] - band - originV_[c], dz, v[c] + band - originV_[c], dz};
+        for (int c = 0; c < C; ++c) {
+            window_[c].num = Double2{v[c] + band - originV_[c], -(v[c] - band - originV_[c])};
+            window_[c].den = Double2{dz, dz};
+            window_[c].limitEnd(originV_[c]);
+        }
         open_ = true;
     }
 
@@ -395,7 +483,9 @@ struct Compressor::Impl {
         std::size_t i = 0;
         while (i < n) {
             // Layer ends are decided vertex by vertex; so is the mid-range.
-            if (kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0 && !grey) {
+            const bool plain =
+                kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0 && !grey;
+            if (plain) {
                 i += options.channels == 1
                          ? greedy.extendRun<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
                          : greedy.extendRun<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
@@ -404,7 +494,16 @@ struct Compressor::Impl {
             }
             double values[kMaxChannels];
             for (std::size_t c = 0; c < nc; ++c) values[c] = static_cast<double>(v[i * nc + c]);
-            if (!push<!kTrustValidInput>(z[i], values, counts ? counts[i] : 0u)) break;
+            const std::uint32_t count = counts ? counts[i] : 0u;
+            if (plain && greedy.segmentOpen()) {
+                // The vertex ends the open segment (push() would try it again first).
+                if (options.channels == 1)
+                    greedy.pushBeyond<1>(z[i], values, count, greedy.window());
+                else
+                    greedy.pushBeyond<3>(z[i], values, count, greedy.window());
+            } else if (!push<!kTrustValidInput>(z[i], values, count)) {
+                break;
+            }
             ++i;
         }
         return i;
