@@ -58,34 +58,44 @@ double since(Clock::time_point start) { return std::chrono::duration<double>(Clo
 struct PixelBuilder::Impl {
     explicit Impl(const CompressorOptions& o) : options(o), compressor(o), swept(o.channels) {}
 
-    // taus[k] = the transmittance of rays[k] beyond zStart, views[k] a view of it.
+    // taus[k] = the transmittance of rays[k] beyond zStart, prepared for the
+    // sweep in inputs[k].
     void buildTransmittances(Span<const SampleRay> rays, float zStart, PixelTimings* timings) {
         const auto start = Clock::now();
         if (taus.size() < rays.size()) taus.resize(rays.size());  // never shrunk: each keeps its storage
-        views.clear();
         for (std::size_t k = 0; k < rays.size(); ++k) {
             try {
                 transmittances.build(rays[k], options.channels, options.keepCounts, zStart, taus[k]);
             } catch (const Error& e) {
                 throw Error(e.code(), detail::concat("ray ", k, ": ", e.what()));
             }
-            views.push_back(taus[k].view());
         }
+        prepare(Span<const VisibilityFunction>(taus.data(), rays.size()));
         if (timings) timings->transmittanceSeconds += since(start);
     }
 
-    VisibilityFunction run(Span<const VisibilityView> first, Span<const SampleRay> rays, Span<const double> weights,
+    template <class Function>
+    void prepare(Span<const Function> functions) {
+        if (prepared.size() < functions.size()) prepared.resize(functions.size());  // never shrunk, as taus
+        inputs.clear();
+        for (std::size_t k = 0; k < functions.size(); ++k) {
+            prepared[k].assign(VisibilityView(functions[k]));
+            inputs.push_back(&prepared[k]);
+        }
+    }
+
+    VisibilityFunction run(Span<const SweepInput* const> first, Span<const SampleRay> rays, Span<const double> weights,
                            PixelTimings* timings) {
         // An error may have left the compressor inside a function: drop that.
         if (compressorInUse) compressor.finish();
         compressorInUse = true;
-        Span<const VisibilityView> inputs = first;
+        Span<const SweepInput* const> layerInputs = first;
         for (;;) {
             if (timings)
-                for (const VisibilityView& tau : inputs) timings->transmittanceVertices += tau.size();
+                for (const SweepInput* tau : layerInputs) timings->transmittanceVertices += tau->vertexCount();
             auto start = Clock::now();
             swept.clear();
-            sweeper.sweep(inputs, weights, options.channels, swept);
+            sweeper.sweep(layerInputs, weights, options.channels, swept);
             if (timings) {
                 timings->sweepSeconds += since(start);
                 start = Clock::now();
@@ -96,7 +106,7 @@ struct PixelBuilder::Impl {
             // The compressor ended a layer: everything up to its depth is in
             // it; the next layer sees what lies beyond.
             buildTransmittances(rays, compressor.layerEndDepth(), timings);
-            inputs = views;
+            layerInputs = inputs;
         }
         const auto start = Clock::now();
         VisibilityFunction result = compressor.finish();
@@ -112,7 +122,8 @@ struct PixelBuilder::Impl {
     Sweeper sweeper;
     BufferingSink swept;
     std::vector<VisibilityFunction> taus;
-    std::vector<VisibilityView> views;
+    std::vector<SweepInput> prepared;
+    std::vector<const SweepInput*> inputs;
 };
 
 PixelBuilder::PixelBuilder(const CompressorOptions& options) : impl_(std::make_unique<Impl>(options)) {}
@@ -123,10 +134,19 @@ PixelBuilder& PixelBuilder::operator=(PixelBuilder&&) noexcept = default;
 VisibilityFunction PixelBuilder::build(Span<const SampleRay> rays, Span<const double> weights,
                                        PixelTimings* timings) {
     impl_->buildTransmittances(rays, -std::numeric_limits<float>::infinity(), timings);
-    return impl_->run(impl_->views, rays, weights, timings);
+    return impl_->run(impl_->inputs, rays, weights, timings);
 }
 
 VisibilityFunction PixelBuilder::build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
+                                       Span<const double> weights, PixelTimings* timings) {
+    if (transmittances.size() != rays.size())
+        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",
+                                                        rays.size(), " rays"));
+    impl_->prepare(transmittances);
+    return impl_->run(impl_->inputs, rays, weights, timings);
+}
+
+VisibilityFunction PixelBuilder::build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays,
                                        Span<const double> weights, PixelTimings* timings) {
     if (transmittances.size() != rays.size())
         throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",

@@ -2,8 +2,10 @@
 // (Lokovic & Veach 2000, §5.1, equation 1).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "dsm/span.h"
 #include "dsm/version.h"
@@ -36,6 +38,55 @@ DSM_NAMESPACE_BEGIN
 DSM_API std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
                            int channels, VertexSink& sink);
 
+/// One input of the sweep, read once ahead of it: its vertices grouped by
+/// depth, each depth with the change of value and of slope it brings to a
+/// sweep (per channel, unweighted). A function averaged into several pixels
+/// (a sample inside the filters of several) is thus read, and its slopes
+/// divided out, once instead of once per pixel; sweeping it gives exactly
+/// (the same doubles) what sweeping the function gives. Keeps its storage
+/// from one assign() to the next.
+class DSM_API SweepInput {
+public:
+    /// What the sweep meets at one depth of the input.
+    struct Step {
+        float z;
+        std::uint32_t count;  // the counts of the input's vertices at z
+        std::uint32_t flags;  // kStartsSloping, ...: changes of the input's state at z
+    };
+    /// The input's segment after z slopes (in some channel) and the one before did not.
+    static constexpr std::uint32_t kStartsSloping = 1u;
+    /// The input's segment after z is flat and the one before sloped.
+    static constexpr std::uint32_t kStopsSloping = 2u;
+    /// Channel c reaches 0 at z (kReachesZero << 2c) or leaves 0 (kLeavesZero << 2c).
+    static constexpr std::uint32_t kReachesZero = 4u;
+    static constexpr std::uint32_t kLeavesZero = 8u;
+
+    /// Prepares `f`, which must have one layer and 1 or 3 channels, and no NaN
+    /// depth; throws dsm::Error (argument) otherwise.
+    void assign(const VisibilityView& f);
+
+    int channels() const { return channels_; }
+    /// Vertices of the prepared function.
+    std::size_t vertexCount() const { return vertices_; }
+    /// Its distinct depths (in storage order, equal neighbours grouped).
+    std::size_t size() const { return size_; }
+    bool empty() const { return size_ == 0; }
+    const Step& step(std::size_t i) const { return steps_[i]; }
+    /// At depth i, per channel: the change of value (the step's height), the
+    /// change of slope and the slope after it, each `channels()` doubles.
+    const double* changes(std::size_t i) const { return numbers_.data() + i * 3 * static_cast<std::size_t>(channels_); }
+
+private:
+    template <std::size_t NC>
+    std::size_t assignWith(const VisibilityView& f);
+
+    std::vector<Step> steps_;
+    std::vector<double> numbers_;
+    std::size_t size_ = 0;
+    std::size_t vertices_ = 0;
+    int channels_ = 1;
+};
+
 /// sweep() with its working memory (heap, per-input state) kept between
 /// calls, for a caller that sweeps many pixels on one thread: once its buffers
 /// have grown to the most inputs, sweeping allocates nothing. Same results and
@@ -51,6 +102,9 @@ public:
     std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
                                VertexSink& sink);
     std::optional<float> sweep(Span<const VisibilityView> inputs, Span<const double> weights, int channels,
+                               VertexSink& sink);
+    /// The same over inputs prepared ahead (each may be swept into many pixels).
+    std::optional<float> sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
                                VertexSink& sink);
 
 private:
