@@ -13,43 +13,6 @@ DSM_NAMESPACE_BEGIN
 
 namespace {
 
-// Keeps the sweep's output in double precision, so that compressing it later
-// is the same as compressing the stream directly (the stages are separated
-// only to time them).
-class BufferingSink final : public VertexSink {
-public:
-    explicit BufferingSink(int channels) : channels_(static_cast<std::size_t>(channels)) {}
-    bool push(float z, const double* values, std::uint32_t count) override {
-        if (size_ == z_.size()) grow();
-        z_[size_] = z;
-        std::copy(values, values + channels_, v_.data() + size_ * channels_);
-        count_[size_] = count;
-        ++size_;
-        return true;
-    }
-    void clear() { size_ = 0; }
-    // Feeds the compressor (the sweep's output is valid input) until it
-    // refuses a vertex; returns false then.
-    bool replay(Compressor& compressor) const {
-        return compressor.pushValid(z_.data(), v_.data(), count_.data(), size_) == size_;
-    }
-
-private:
-    // The arrays are kept at their largest size and written by index.
-    void grow() {
-        const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
-        z_.resize(capacity);
-        v_.resize(capacity * channels_);
-        count_.resize(capacity);
-    }
-
-    std::size_t channels_;
-    std::size_t size_ = 0;
-    std::vector<float> z_;
-    std::vector<double> v_;
-    std::vector<std::uint32_t> count_;
-};
-
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
@@ -100,7 +63,10 @@ struct PixelBuilder::Impl {
                 timings->sweepSeconds += since(start);
                 start = Clock::now();
             }
-            const bool complete = swept.replay(compressor);
+            // The sweep's output is valid input: the compressor takes it
+            // until it refuses a vertex (a layer ended).
+            const bool complete =
+                compressor.pushValid(swept.depths(), swept.values(), swept.counts(), swept.size()) == swept.size();
             if (timings) timings->compressionSeconds += since(start);
             if (complete) break;
             // The compressor ended a layer: everything up to its depth is in
@@ -120,7 +86,10 @@ struct PixelBuilder::Impl {
     bool compressorInUse = false;
     TransmittanceBuilder transmittances;
     Sweeper sweeper;
-    BufferingSink swept;
+    // The sweep's output in double precision, so that compressing it later is
+    // the same as compressing the stream directly (the stages are separated
+    // only to time them).
+    SweptVertices swept;
     std::vector<VisibilityFunction> taus;
     std::vector<SweepInput> prepared;
     std::vector<const SweepInput*> inputs;

@@ -161,11 +161,13 @@ struct Sweeper::Impl {
             prepared[k].assign(VisibilityView(inputs[k]));
             preparedInputs.push_back(&prepared[k]);
         }
-        return channels == 1 ? run<1>(preparedInputs, sink) : run<kMaxChannels>(preparedInputs, sink);
+        return channels == 1 ? run<1>(Span<const SweepInput* const>(preparedInputs), sink)
+                             : run<kMaxChannels>(Span<const SweepInput* const>(preparedInputs), sink);
     }
 
+    template <class Sink>
     std::optional<float> runPrepared(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
-                                     VertexSink& sink) {
+                                     Sink& sink) {
         const bool any = normaliseWeights(inputs.size(), weights, channels, [&](std::size_t k) {
             if (inputs[k]->channels() != channels)
                 throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k]->channels(),
@@ -178,8 +180,10 @@ struct Sweeper::Impl {
     }
 
     // The sweep proper, over checked inputs with NC channels and weights w.
-    template <std::size_t NC>
-    std::optional<float> run(Span<const SweepInput* const> inputs, VertexSink& sink);
+    // Sink is VertexSink, or a final one whose push() the compiler calls
+    // directly.
+    template <std::size_t NC, class Sink>
+    std::optional<float> run(Span<const SweepInput* const> inputs, Sink& sink);
 };
 
 Sweeper::Sweeper() : impl_(std::make_unique<Impl>()) {}
@@ -200,6 +204,21 @@ std::optional<float> Sweeper::sweep(Span<const VisibilityView> inputs, Span<cons
 std::optional<float> Sweeper::sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
                                     VertexSink& sink) {
     return impl_->runPrepared(inputs, weights, channels, sink);
+}
+
+std::optional<float> Sweeper::sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                                    SweptVertices& out) {
+    if (out.channels() != channels)
+        throw Error(ErrorCode::argument, detail::concat("sweep: the output has ", out.channels(),
+                                                        " channels, the inputs ", channels));
+    return impl_->runPrepared(inputs, weights, channels, out);
+}
+
+void SweptVertices::grow() {
+    const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
+    z_.resize(capacity);
+    v_.resize(capacity * channels_);
+    count_.resize(capacity);
 }
 
 std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
@@ -232,8 +251,8 @@ bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, 
     return true;
 }
 
-template <std::size_t NC>
-std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, VertexSink& sink) {
+template <std::size_t NC, class Sink>
+std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Sink& sink) {
     const std::size_t n = inputs.size();
     constexpr std::size_t nc = NC;
     next.assign(n, 0);

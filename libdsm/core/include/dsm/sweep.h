@@ -87,6 +87,41 @@ private:
     int channels_ = 1;
 };
 
+/// The sweep's output kept as it comes, values in double precision, for a
+/// caller that hands it on after the sweep (to a compressor, timed apart).
+/// Sweeping into it (the Sweeper overload) stores each vertex without a
+/// virtual call. Keeps its storage from one clear() to the next.
+class DSM_API SweptVertices final : public VertexSink {
+public:
+    /// Vertices of `channels` (1 or 3) values.
+    explicit SweptVertices(int channels) : channels_(static_cast<std::size_t>(channels)) {}
+    bool push(float z, const double* values, std::uint32_t count) override {
+        if (size_ == z_.size()) grow();
+        z_[size_] = z;
+        for (std::size_t c = 0; c < channels_; ++c) v_[size_ * channels_ + c] = values[c];
+        count_[size_] = count;
+        ++size_;
+        return true;
+    }
+    void clear() { size_ = 0; }
+    int channels() const { return static_cast<int>(channels_); }
+    std::size_t size() const { return size_; }
+    const float* depths() const { return z_.data(); }
+    /// size() * channels() values, vertex-major.
+    const double* values() const { return v_.data(); }
+    const std::uint32_t* counts() const { return count_.data(); }
+
+private:
+    // The arrays are kept at their largest size and written by index.
+    void grow();
+
+    std::size_t channels_;
+    std::size_t size_ = 0;
+    std::vector<float> z_;
+    std::vector<double> v_;
+    std::vector<std::uint32_t> count_;
+};
+
 /// sweep() with its working memory (heap, per-input state) kept between
 /// calls, for a caller that sweeps many pixels on one thread: once its buffers
 /// have grown to the most inputs, sweeping allocates nothing. Same results and
@@ -106,6 +141,9 @@ public:
     /// The same over inputs prepared ahead (each may be swept into many pixels).
     std::optional<float> sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
                                VertexSink& sink);
+    /// The same into `out`, whose channel count must be `channels`.
+    std::optional<float> sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                               SweptVertices& out);
 
 private:
     struct Impl;
