@@ -26,19 +26,25 @@ std::uint64_t eventKey(float z, std::uint32_t input) {
 std::uint32_t depthOf(std::uint64_t key) { return static_cast<std::uint32_t>(key >> 32); }
 std::uint32_t inputOf(std::uint64_t key) { return static_cast<std::uint32_t>(key); }
 
-// Restores the min-heap order (earliest event on top) below position i after
-// heap[i] changed: the next depth of the input on top replaces it in one
-// sift-down, where a pop and a push would sift twice.
-void siftDown(std::vector<std::uint64_t>& heap, std::size_t i) {
-    const std::size_t n = heap.size();
-    const std::uint64_t moving = heap[i];
-    for (;;) {
-        std::size_t child = 2 * i + 1;
-        if (child >= n) break;
+// Replaces the top of the min-heap heap[0, n) by `moving` and restores the
+// heap order, bottom-up (Floyd): the hole at the top sinks to a leaf along the
+// smaller children, one comparison a level, and `moving` rises from there.
+// The input on top usually moves far behind (its next depth comes after most
+// others'), so it rarely rises more than a level; sinking it from the top would
+// compare twice a level. Keys are unique, so the order of events is that of
+// any heap.
+void replaceTop(std::uint64_t* heap, std::size_t n, std::uint64_t moving) {
+    std::size_t i = 0;
+    for (std::size_t child = 1; child < n; child = 2 * i + 1) {
         if (child + 1 < n && heap[child + 1] < heap[child]) ++child;
-        if (!(heap[child] < moving)) break;
         heap[i] = heap[child];
         i = child;
+    }
+    while (i > 0) {
+        const std::size_t parent = (i - 1) / 2;
+        if (!(moving < heap[parent])) break;
+        heap[i] = heap[parent];
+        i = parent;
     }
     heap[i] = moving;
 }
@@ -59,11 +65,16 @@ void SweepInput::assign(const VisibilityView& f) {
                                                         " layers; the sweep averages single-layer functions"));
     channels_ = f.channels();
     vertices_ = f.size();
-    // Room for a depth per vertex, the most there can be; the arrays are
-    // kept at their largest size and written by index.
-    if (steps_.size() < f.size()) {
-        steps_.resize(f.size());
-        numbers_.resize(f.size() * 3 * kMaxChannels);
+    // Room for a depth per vertex, the most there can be, grown by doubling:
+    // a worker's inputs soon have room for every input they see.
+    const std::size_t numbers = f.size() * 3 * static_cast<std::size_t>(channels_);
+    if (stepCapacity_ < f.size()) {
+        stepCapacity_ = std::max({f.size(), 2 * stepCapacity_, std::size_t{8}});
+        steps_ = std::make_unique_for_overwrite<Step[]>(stepCapacity_);
+    }
+    if (numberCapacity_ < numbers) {
+        numberCapacity_ = std::max({numbers, 2 * numberCapacity_, std::size_t{24}});
+        numbers_ = std::make_unique_for_overwrite<double[]>(numberCapacity_);
     }
     size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
 }
@@ -74,8 +85,8 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
     const float* z = f.depths().data();
     const float* v = f.allValues().data();
     const std::uint32_t* counts = f.hasCounts() ? f.counts().data() : nullptr;
-    Step* out = steps_.data();
-    double* numbers = numbers_.data();
+    Step* out = steps_.get();
+    double* numbers = numbers_.get();
     // The input's state after the depths read so far, as the sweep sees it.
     double slope[NC] = {};
     bool atZero[NC] = {};
@@ -278,7 +289,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
     double lastEmitted[kMaxChannels] = {1.0, 1.0, 1.0};
-    double left[kMaxChannels];
+    double left[kMaxChannels] = {1.0, 1.0, 1.0};  // channels beyond NC are never read
     double slopeMagnitude[kMaxChannels] = {0.0, 0.0, 0.0};  // through outSlope since it was exact
     double zCurrent = 0.0;
 
@@ -329,12 +340,12 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
                 }
             }
             if (i + 1 < f.size()) {
-                heap.front() = eventKey(f.step(i + 1).z, k);
+                replaceTop(heap.data(), heap.size(), eventKey(f.step(i + 1).z, k));
             } else {
-                heap.front() = heap.back();
+                const std::uint64_t last = heap.back();
                 heap.pop_back();
+                if (!heap.empty()) replaceTop(heap.data(), heap.size(), last);
             }
-            if (!heap.empty()) siftDown(heap, 0);
         } while (!heap.empty() && depthOf(heap.front()) == depth);
 
         bool step = false;

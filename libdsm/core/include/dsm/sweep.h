@@ -74,14 +74,17 @@ public:
     const Step& step(std::size_t i) const { return steps_[i]; }
     /// At depth i, per channel: the change of value (the step's height), the
     /// change of slope and the slope after it, each `channels()` doubles.
-    const double* changes(std::size_t i) const { return numbers_.data() + i * 3 * static_cast<std::size_t>(channels_); }
+    const double* changes(std::size_t i) const { return numbers_.get() + i * 3 * static_cast<std::size_t>(channels_); }
 
 private:
     template <std::size_t NC>
     std::size_t assignWith(const VisibilityView& f);
 
-    std::vector<Step> steps_;
-    std::vector<double> numbers_;
+    // Grown (never shrunk, never initialised) to the largest input seen.
+    std::unique_ptr<Step[]> steps_;
+    std::unique_ptr<double[]> numbers_;
+    std::size_t stepCapacity_ = 0;
+    std::size_t numberCapacity_ = 0;
     std::size_t size_ = 0;
     std::size_t vertices_ = 0;
     int channels_ = 1;
@@ -98,7 +101,13 @@ public:
     bool push(float z, const double* values, std::uint32_t count) override {
         if (size_ == z_.size()) grow();
         z_[size_] = z;
-        for (std::size_t c = 0; c < channels_; ++c) v_[size_ * channels_ + c] = values[c];
+        // One or three values, written out: a loop here becomes a call to memcpy.
+        double* v = v_.data() + size_ * channels_;
+        v[0] = values[0];
+        if (channels_ == 3) {
+            v[1] = values[1];
+            v[2] = values[2];
+        }
         count_[size_] = count;
         ++size_;
         return true;
