@@ -124,9 +124,10 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     const std::uint64_t row = std::uint64_t(e.width) * tile * perPixel;
     const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * options.filterWidth - 0.5)));
     const std::uint64_t samplePixels = (tile + 2 * reach) * (tile + 2 * reach);
-    // Per sample: its data, two hits, and their transmittance (four vertices).
-    const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(VisibilityFunction) +
-                                    4 * (4 + 4 * std::uint64_t(channels));
+    // Per sample: its data, two hits, and their transmittance prepared for the
+    // sweep (four depths).
+    const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(SweepInput) +
+                                    4 * (sizeof(SweepInput::Step) + 3 * sizeof(double) * std::uint64_t(channels));
     const std::uint64_t samples =
         std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
     // Two rows of tiles (one written while the next is built) and the pending mip tiles.
@@ -230,8 +231,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     compression.keepCounts = counts;
     compression.maxLayers = options.mtsmLayers;
 
+    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::optional<ScanlineHider> hider;
-    if (scanline) hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach));
+    if (scanline)  // bucketing the primitives uses the build's threads
+        arena.execute([&] { hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach)); });
 
     tbb::enumerable_thread_specific<TileWorkspace> workspaces([&] { return TileWorkspace(compression); });
 
@@ -395,7 +398,6 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     BuildStats result;
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
-    tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     // Two rows of tiles: the writer takes one (in the arena, as one more task)
     // while the workers build the next. Tiles reach the writer in the same
     // order as without the overlap, so the file is the same.

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
 DSM_NAMESPACE_BEGIN
 
 namespace {
@@ -39,9 +42,9 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         std::uint32_t x0, y0, x1, y1;
         bool any;
     };
-    std::vector<TileRect> rects(primitives.size());
-    std::vector<std::size_t> counts(std::size_t(tilesX_) * tilesY_ + 1, 0);
-    for (std::size_t i = 0; i < primitives.size(); ++i) {
+    // Primitive i's raster bounds (into raster_) and tile rectangle.
+    const auto project = [&](std::size_t i, TileRect& t) {
+        t.any = false;
         const Bounds3 b = surfaces.bounds(primitives[i]);
         RasterBounds r{kInf, kInf, -kInf, -kInf};
         bool inFront = false, behindLight = false;
@@ -60,11 +63,9 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
             r.x1 = std::max(r.x1, rx);
             r.y1 = std::max(r.y1, ry);
         }
-        TileRect& t = rects[i];
-        t.any = false;
         // Every point of the primitive lies at depth <= near: no crossing
         // has t > near. (The light-space box of the corners bounds it.)
-        if (!inFront) continue;
+        if (!inFront) return;
         if (behindLight) r = {-kInf, -kInf, kInf, kInf};
         const auto slack = [](double v) { return kRasterSlack * std::max(1.0, std::abs(v)); };
         if (std::isfinite(r.x0)) r.x0 -= slack(r.x0);
@@ -72,10 +73,19 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         if (std::isfinite(r.x1)) r.x1 += slack(r.x1);
         if (std::isfinite(r.y1)) r.y1 += slack(r.y1);
         raster_[i] = r;
-        if (!tileRange(r.x0, r.x1, tileSize, reach, tilesX_, t.x0, t.x1) ||
-            !tileRange(r.y0, r.y1, tileSize, reach, tilesY_, t.y0, t.y1))
-            continue;
-        t.any = true;
+        t.any = tileRange(r.x0, r.x1, tileSize, reach, tilesX_, t.x0, t.x1) &&
+                tileRange(r.y0, r.y1, tileSize, reach, tilesY_, t.y0, t.y1);
+    };
+    std::vector<TileRect> rects(primitives.size());
+    // Each primitive's bounds, projected: independent of the others, so shared
+    // among the threads of the caller's arena (each writes only its own
+    // entries: the result does not depend on the thread count).
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, primitives.size(), 1024), [&](const auto& range) {
+        for (std::size_t i = range.begin(); i < range.end(); ++i) project(i, rects[i]);
+    });
+    std::vector<std::size_t> counts(std::size_t(tilesX_) * tilesY_ + 1, 0);
+    for (const TileRect& t : rects) {
+        if (!t.any) continue;
         for (std::uint32_t ty = t.y0; ty <= t.y1; ++ty)
             for (std::uint32_t tx = t.x0; tx <= t.x1; ++tx) ++counts[std::size_t(ty) * tilesX_ + tx];
     }

@@ -33,6 +33,8 @@ public:
     /// beyond a tile its samples lie (the filter's reach). Primitives wholly
     /// at or before the near plane are left out (they cannot be crossed);
     /// one that reaches behind a perspective light goes into every tile.
+    /// Projects the primitives in parallel in the caller's TBB arena; the
+    /// buckets do not depend on the thread count.
     ScanlineHider(const ScenePrimitives& surfaces, const LightCamera& camera, std::uint32_t width,
                   std::uint32_t height, std::uint32_t tileSize, std::uint32_t reach);
 
