@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <functional>
 #include <vector>
 
 #include "dsm/error.h"
@@ -284,7 +285,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
     heap.clear();
     for (std::size_t k = 0; k < n; ++k)
         if (!inputs[k]->empty()) heap.push_back(eventKey(inputs[k]->step(0).z, static_cast<std::uint32_t>(k)));
-    std::sort(heap.begin(), heap.end());  // sorted is a heap
+    std::make_heap(heap.begin(), heap.end(), std::greater<>());  // a min-heap, laid out as replaceTop() reads it
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
