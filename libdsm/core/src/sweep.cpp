@@ -66,15 +66,18 @@ void SweepInput::assign(const VisibilityView& f) {
                                                         " layers; the sweep averages single-layer functions"));
     channels_ = f.channels();
     vertices_ = f.size();
-    // Room for a depth per vertex, the most there can be, grown by doubling:
-    // a worker's inputs soon have room for every input they see.
-    const std::size_t numbers = f.size() * 3 * static_cast<std::size_t>(channels_);
-    if (stepCapacity_ < f.size()) {
-        stepCapacity_ = std::max({f.size(), 2 * stepCapacity_, std::size_t{8}});
+    // Room for its distinct depths, grown by doubling: a worker's inputs soon
+    // have room for every input they see, and hold little more.
+    const Span<const float> z = f.depths();
+    std::size_t depths = 0;
+    for (std::size_t i = 0; i < z.size(); ++i) depths += i == 0 || z[i] != z[i - 1];
+    const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels_);
+    if (stepCapacity_ < depths) {
+        stepCapacity_ = std::max(depths, 2 * stepCapacity_);
         steps_ = std::make_unique_for_overwrite<Step[]>(stepCapacity_);
     }
     if (numberCapacity_ < numbers) {
-        numberCapacity_ = std::max({numbers, 2 * numberCapacity_, std::size_t{24}});
+        numberCapacity_ = std::max(numbers, 2 * numberCapacity_);
         numbers_ = std::make_unique_for_overwrite<double[]>(numberCapacity_);
     }
     size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
@@ -89,7 +92,6 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
     Step* out = steps_.get();
     double* numbers = numbers_.get();
     // The input's state after the depths read so far, as the sweep sees it.
-    double slope[NC] = {};
     bool atZero[NC] = {};
     bool sloping = false;
     std::size_t depths = 0;
@@ -108,9 +110,8 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
                                                          " exceed the 2^32 - 1 a vertex holds"));
         const bool more = last + 1 < n;
         Step step{depth, static_cast<std::uint32_t>(count), 0u};
-        double* valueChange = numbers + depths * 3 * NC;
-        double* slopeChange = valueChange + NC;
-        double* slopeAfter = slopeChange + NC;
+        double* valueChange = numbers + depths * 2 * NC;
+        double* slopeAfter = valueChange + NC;
         bool slopingAfter = false;
         for (std::size_t c = 0; c < NC; ++c) {
             const double before = first == 0 ? 1.0 : v[first * NC + c];
@@ -120,9 +121,7 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
                 more ? (static_cast<double>(v[(last + 1) * NC + c]) - after) /
                            (static_cast<double>(z[last + 1]) - static_cast<double>(depth))
                      : 0.0;
-            slopeChange[c] = newSlope - slope[c];
             slopeAfter[c] = newSlope;
-            slope[c] = newSlope;
             slopingAfter = slopingAfter || newSlope != 0.0;
             if ((after == 0.0) != atZero[c]) {
                 atZero[c] = after == 0.0;
@@ -311,12 +310,15 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
             const std::size_t i = next[k]++;
             const SweepInput::Step& step = f.step(i);
             const double* valueChange = f.changes(i);
-            const double* slopeChange = valueChange + nc;
+            const double* slopeAfter = valueChange + nc;
+            // The slope before this depth: the one after the input's previous
+            // depth, 0 before its first.
+            const double* slopeBefore = i == 0 ? nullptr : f.changes(i - 1) + nc;
             const double wk = w[k];
             count += step.count;
             for (std::size_t c = 0; c < nc; ++c) {
                 value[c] += wk * valueChange[c];
-                const double change = wk * slopeChange[c];
+                const double change = wk * (slopeAfter[c] - (slopeBefore ? slopeBefore[c] : 0.0));
                 if (change != 0.0) {
                     outSlope[c] += change;
                     slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
@@ -356,7 +358,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
                 slopeMagnitude[c] = 0.0;
             } else if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
                 double exact = 0.0;
-                for (std::uint32_t k : sloped) exact += w[k] * inputs[k]->changes(next[k] - 1)[2 * nc + c];
+                for (std::uint32_t k : sloped) exact += w[k] * inputs[k]->changes(next[k] - 1)[nc + c];
                 outSlope[c] = exact;
                 slopeMagnitude[c] = std::abs(exact);
             }

@@ -39,8 +39,8 @@ DSM_API std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<c
                            int channels, VertexSink& sink);
 
 /// One input of the sweep, read once ahead of it: its vertices grouped by
-/// depth, each depth with the change of value and of slope it brings to a
-/// sweep (per channel, unweighted). A function averaged into several pixels
+/// depth, each depth with the change of value it brings to a sweep and the
+/// slope after it (per channel, unweighted). A function averaged into several pixels
 /// (a sample inside the filters of several) is thus read, and its slopes
 /// divided out, once instead of once per pixel; sweeping it gives exactly
 /// (the same doubles) what sweeping the function gives. Keeps its storage
@@ -72,9 +72,9 @@ public:
     std::size_t size() const { return size_; }
     bool empty() const { return size_ == 0; }
     const Step& step(std::size_t i) const { return steps_[i]; }
-    /// At depth i, per channel: the change of value (the step's height), the
-    /// change of slope and the slope after it, each `channels()` doubles.
-    const double* changes(std::size_t i) const { return numbers_.get() + i * 3 * static_cast<std::size_t>(channels_); }
+    /// At depth i, per channel: the change of value (the step's height), then
+    /// the slope after it, each `channels()` doubles.
+    const double* changes(std::size_t i) const { return numbers_.get() + i * 2 * static_cast<std::size_t>(channels_); }
 
 private:
     template <std::size_t NC>
