@@ -127,7 +127,7 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     // Per sample: its data, two hits, and their transmittance prepared for the
     // sweep (four depths).
     const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(SweepInput) +
-                                    4 * (sizeof(SweepInput::Step) + 3 * sizeof(double) * std::uint64_t(channels));
+                                    4 * (sizeof(SweepInput::Step) + 2 * sizeof(double) * std::uint64_t(channels));
     const std::uint64_t samples =
         std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
     // Two rows of tiles (one written while the next is built) and the pending mip tiles.
