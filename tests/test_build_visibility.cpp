@@ -323,7 +323,8 @@ std::vector<VisibilityFunction> transmittancesOf(std::span<const SampleRay> rays
 
 TEST(PixelBuilder, ReusedBuilderMatchesBuildVisibility) {
     // One builder per set of options, over random pixels of every size, from
-    // the rays or from their transmittances built beforehand, gives exactly
+    // the rays or from their transmittances built (and prepared for the
+    // sweep) beforehand, gives exactly
     // what buildVisibility() gives each pixel alone, layers included.
     std::mt19937_64 rng(77);
     const SurfaceHit planes[] = {hit(1.0f, 1.0f), hit(2.0f, 0.5f), hit(3.0f, 1.0f)};
@@ -341,6 +342,13 @@ TEST(PixelBuilder, ReusedBuilderMatchesBuildVisibility) {
                 const std::vector<VisibilityFunction> taus = transmittancesOf(p.rays, o);
                 const std::vector<dsm::VisibilityView> views(taus.begin(), taus.end());
                 EXPECT_EQ(builder.build(views, p.rays, p.weights), expected) << "trial " << trial;
+                std::vector<dsm::SweepInput> prepared(taus.size());
+                std::vector<const dsm::SweepInput*> inputs;
+                for (std::size_t k = 0; k < taus.size(); ++k) {
+                    prepared[k].assign(taus[k]);
+                    inputs.push_back(&prepared[k]);
+                }
+                EXPECT_EQ(builder.build(inputs, p.rays, p.weights), expected) << "trial " << trial;
                 if (HasFailure()) return;
             }
         }

@@ -13,6 +13,8 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <random>
 #include <string>
 #include <tuple>
@@ -222,6 +224,26 @@ TEST(ScanlineHider, FindsHairCrossingsAtTheRibbonsEdges) {
         SCOPED_TRACE("orthographic");
         expectHiderFindsRibbonEdges(distant, 512);
     }
+
+// The bucketing projects the primitives on the build's threads: with
+// thousands of them (split among the threads) a build is the same to the
+// byte with one thread as with two.
+TEST(ScanlineHider, BucketsDoNotDependOnTheThreadCount) {
+    const TempDir dir;
+    const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");
+    ASSERT_GT(dsm::RayCaster(scene, dsm::RayCaster::Surfaces::none).surfaces().all().size(), 10000u);
+    dsm::BuildOptions options = smallBuild();
+    options.samplesPerPixel = 1;
+    std::string bytes[2];
+    for (unsigned threads : {1u, 2u}) {
+        options.threads = threads;
+        const std::string path = (dir / ("threads" + std::to_string(threads) + ".dsm")).string();
+        dsm::buildMap(scene, options, path);
+        std::ifstream in(path, std::ios::binary);
+        bytes[threads - 1].assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+    }
+    ASSERT_GT(bytes[0].size(), 1000u);
+    EXPECT_TRUE(bytes[0] == bytes[1]);
 }
 
 // Rays aimed into random primitives' boxes, from inside them, from near

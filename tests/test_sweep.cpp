@@ -325,11 +325,13 @@ TEST(Sweep, ResultFeedsTheCompressorWithinTolerance) {
 }  // namespace
 
 TEST(Sweep, ReusedSweeperMatchesFreshSweeps) {
-    // One sweeper over pixels of changing size and channels, over functions
-    // and over views of them, gives what sweep() gives each pixel alone
-    // (the same doubles, not just close ones).
+    // One sweeper over pixels of changing size and channels, over functions,
+    // views of them and inputs prepared ahead (reused from pixel to pixel),
+    // gives what sweep() gives each pixel alone (the same doubles, not just
+    // close ones).
     std::mt19937_64 rng(41);
     dsm::Sweeper sweeper;
+    std::vector<dsm::SweepInput> prepared;
     dsm::test::RandomShape shape;
     for (int trial = 0; trial < 30; ++trial) {
         const int channels = trial % 2 ? 3 : 1;
@@ -343,12 +345,21 @@ TEST(Sweep, ReusedSweeperMatchesFreshSweeps) {
         }
         weights[0] = 1.0;
         const RecordingSink fresh = runSweep(inputs, weights, channels);
-        RecordingSink fromFunctions, fromViews;
-        fromFunctions.channels = fromViews.channels = channels;
+        RecordingSink fromFunctions, fromViews, fromPrepared;
+        fromFunctions.channels = fromViews.channels = fromPrepared.channels = channels;
         EXPECT_FALSE(sweeper.sweep(std::span<const VisibilityFunction>(inputs), weights, channels, fromFunctions));
         std::vector<dsm::VisibilityView> views(inputs.begin(), inputs.end());
         EXPECT_FALSE(sweeper.sweep(std::span<const dsm::VisibilityView>(views), weights, channels, fromViews));
-        for (const RecordingSink* out : {&fromFunctions, &fromViews}) {
+        if (prepared.size() < n) prepared.resize(n);
+        std::vector<const dsm::SweepInput*> preparedInputs;
+        for (std::size_t k = 0; k < n; ++k) {
+            prepared[k].assign(inputs[k]);
+            EXPECT_EQ(prepared[k].vertexCount(), inputs[k].size());
+            preparedInputs.push_back(&prepared[k]);
+        }
+        EXPECT_FALSE(sweeper.sweep(std::span<const dsm::SweepInput* const>(preparedInputs), weights, channels,
+                                   fromPrepared));
+        for (const RecordingSink* out : {&fromFunctions, &fromViews, &fromPrepared}) {
             ASSERT_EQ(out->vertices.size(), fresh.vertices.size()) << "trial " << trial;
             for (std::size_t i = 0; i < fresh.vertices.size(); ++i) {
                 EXPECT_EQ(out->vertices[i].z, fresh.vertices[i].z);
@@ -357,5 +368,41 @@ TEST(Sweep, ReusedSweeperMatchesFreshSweeps) {
             }
         }
         if (HasFailure()) return;
+    }
+}
+
+TEST(Sweep, PreparedInputsAreChecked) {
+    VisibilityFunction layered = simple();
+    layered.beginLayer();
+    layered.append(2.0f, 0.5f);
+    dsm::SweepInput input;
+    try {
+        input.assign(layered);
+        ADD_FAILURE() << "no error";
+    } catch (const dsm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("2 layers"));
+    }
+    VisibilityFunction undefinedDepth(1);
+    undefinedDepth.append(std::numeric_limits<float>::quiet_NaN(), 0.5f);
+    try {
+        input.assign(undefinedDepth);
+        ADD_FAILURE() << "no error";
+    } catch (const dsm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("depth NaN at vertex 0"));
+    }
+    // Channels must match the sweep's, as for functions.
+    dsm::SweepInput mono, rgb;
+    mono.assign(simple(1));
+    rgb.assign(simple(3));
+    const dsm::SweepInput* inputs[] = {&mono, &rgb};
+    const double w[] = {1.0, 1.0};
+    RecordingSink sink;
+    sink.channels = 1;
+    dsm::Sweeper sweeper;
+    try {
+        sweeper.sweep(std::span<const dsm::SweepInput* const>(inputs), w, 1, sink);
+        ADD_FAILURE() << "no error";
+    } catch (const dsm::Error& e) {
+        EXPECT_THAT(e.what(), HasSubstr("input 1 has 3 channels"));
     }
 }

@@ -23,6 +23,7 @@
 #include "dsm/names.h"
 #include "dsm/output_file.h"
 #include "dsm/reader.h"
+#include "dsm/sweep.h"
 #include "dsm/threads.h"
 #include "dsm/value_step.h"
 #include "dsm/writer.h"
@@ -77,13 +78,15 @@ struct TileWorkspace {
     std::vector<std::vector<RaySurfaceHit>> hits;
     std::vector<RaySurfaceHit> rayHits;
     std::vector<RayVolumeSample> volume;
-    // Per sample: its transmittance, built when a pixel first uses it and
-    // then shared by every pixel whose filter reaches the sample.
-    std::vector<VisibilityFunction> transmittances;
+    // Per sample: its transmittance, built (in `tau`) and prepared for the
+    // sweep when a pixel first uses it, then shared by every pixel whose
+    // filter reaches the sample.
+    VisibilityFunction tau;
+    std::vector<SweepInput> transmittances;
     std::vector<unsigned char> built;
     // One pixel's inputs.
     std::vector<SampleRay> rays;
-    std::vector<VisibilityView> views;
+    std::vector<const SweepInput*> inputs;
     std::vector<double> weights;
     TransmittanceBuilder transmittance;
     PixelBuilder pixel;
@@ -121,9 +124,10 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
     const std::uint64_t row = std::uint64_t(e.width) * tile * perPixel;
     const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * options.filterWidth - 0.5)));
     const std::uint64_t samplePixels = (tile + 2 * reach) * (tile + 2 * reach);
-    // Per sample: its data, two hits, and their transmittance (four vertices).
-    const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(VisibilityFunction) +
-                                    4 * (4 + 4 * std::uint64_t(channels));
+    // Per sample: its data, two hits, and their transmittance prepared for the
+    // sweep (four depths).
+    const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(SweepInput) +
+                                    4 * (sizeof(SweepInput::Step) + 2 * sizeof(double) * std::uint64_t(channels));
     const std::uint64_t samples =
         std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
     // Two rows of tiles (one written while the next is built) and the pending mip tiles.
@@ -229,10 +233,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
 
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::optional<ScanlineHider> hider;
-    if (scanline)
-        arena.execute([&] {
-            hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach));
-        });
+    if (scanline)  // bucketing the primitives uses the build's threads
+        arena.execute([&] { hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach)); });
 
     tbb::enumerable_thread_specific<TileWorkspace> workspaces([&] { return TileWorkspace(compression); });
 
@@ -353,7 +355,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
             for (std::uint32_t x = rx0; x < rx1; ++x) {
                 const auto start = Clock::now();
                 ws.rays.clear();
-                ws.views.clear();
+                ws.inputs.clear();
                 ws.weights.clear();
                 const double cx = x + 0.5, cy = y + 0.5;
                 for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
@@ -367,7 +369,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
                             const SampleRay ray{s.hits, s.volume};
                             if (!ws.built[i]) {
                                 try {
-                                    ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.transmittances[i]);
+                                    ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.tau);
+                                    ws.transmittances[i].assign(ws.tau);
                                 } catch (const Error& e) {
                                     throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ",
                                                                  ws.rays.size(), ": ", e.what()));
@@ -375,7 +378,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
                                 ws.built[i] = 1;
                             }
                             ws.rays.push_back(ray);
-                            ws.views.push_back(ws.transmittances[i].view());
+                            ws.inputs.push_back(&ws.transmittances[i]);
                             ws.weights.push_back(wgt);
                         }
                     }
@@ -383,7 +386,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
                 VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
                 if (ws.rays.empty()) continue;  // a filter too narrow to catch a sample
                 try {
-                    f = ws.pixel.build(ws.views, ws.rays, ws.weights, &stats.timings);
+                    f = ws.pixel.build(ws.inputs, ws.rays, ws.weights, &stats.timings);
                 } catch (const Error& e) {
                     throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                 }

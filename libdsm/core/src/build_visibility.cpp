@@ -13,43 +13,6 @@ DSM_NAMESPACE_BEGIN
 
 namespace {
 
-// Keeps the sweep's output in double precision, so that compressing it later
-// is the same as compressing the stream directly (the stages are separated
-// only to time them).
-class BufferingSink final : public VertexSink {
-public:
-    explicit BufferingSink(int channels) : channels_(static_cast<std::size_t>(channels)) {}
-    bool push(float z, const double* values, std::uint32_t count) override {
-        if (size_ == z_.size()) grow();
-        z_[size_] = z;
-        std::copy(values, values + channels_, v_.data() + size_ * channels_);
-        count_[size_] = count;
-        ++size_;
-        return true;
-    }
-    void clear() { size_ = 0; }
-    // Feeds the compressor (the sweep's output is valid input) until it
-    // refuses a vertex; returns false then.
-    bool replay(Compressor& compressor) const {
-        return compressor.pushValid(z_.data(), v_.data(), count_.data(), size_) == size_;
-    }
-
-private:
-    // The arrays are kept at their largest size and written by index.
-    void grow() {
-        const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
-        z_.resize(capacity);
-        v_.resize(capacity * channels_);
-        count_.resize(capacity);
-    }
-
-    std::size_t channels_;
-    std::size_t size_ = 0;
-    std::vector<float> z_;
-    std::vector<double> v_;
-    std::vector<std::uint32_t> count_;
-};
-
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
@@ -58,45 +21,58 @@ double since(Clock::time_point start) { return std::chrono::duration<double>(Clo
 struct PixelBuilder::Impl {
     explicit Impl(const CompressorOptions& o) : options(o), compressor(o), swept(o.channels) {}
 
-    // taus[k] = the transmittance of rays[k] beyond zStart, views[k] a view of it.
+    // taus[k] = the transmittance of rays[k] beyond zStart, prepared for the
+    // sweep in inputs[k].
     void buildTransmittances(Span<const SampleRay> rays, float zStart, PixelTimings* timings) {
         const auto start = Clock::now();
         if (taus.size() < rays.size()) taus.resize(rays.size());  // never shrunk: each keeps its storage
-        views.clear();
         for (std::size_t k = 0; k < rays.size(); ++k) {
             try {
                 transmittances.build(rays[k], options.channels, options.keepCounts, zStart, taus[k]);
             } catch (const Error& e) {
                 throw Error(e.code(), detail::concat("ray ", k, ": ", e.what()));
             }
-            views.push_back(taus[k].view());
         }
+        prepare(Span<const VisibilityFunction>(taus.data(), rays.size()));
         if (timings) timings->transmittanceSeconds += since(start);
     }
 
-    VisibilityFunction run(Span<const VisibilityView> first, Span<const SampleRay> rays, Span<const double> weights,
+    template <class Function>
+    void prepare(Span<const Function> functions) {
+        if (prepared.size() < functions.size()) prepared.resize(functions.size());  // never shrunk, as taus
+        inputs.clear();
+        for (std::size_t k = 0; k < functions.size(); ++k) {
+            prepared[k].assign(VisibilityView(functions[k]));
+            inputs.push_back(&prepared[k]);
+        }
+    }
+
+    VisibilityFunction run(Span<const SweepInput* const> first, Span<const SampleRay> rays, Span<const double> weights,
                            PixelTimings* timings) {
         // An error may have left the compressor inside a function: drop that.
         if (compressorInUse) compressor.finish();
         compressorInUse = true;
-        Span<const VisibilityView> inputs = first;
+        Span<const SweepInput* const> layerInputs = first;
         for (;;) {
             if (timings)
-                for (const VisibilityView& tau : inputs) timings->transmittanceVertices += tau.size();
+                for (const SweepInput* tau : layerInputs) timings->transmittanceVertices += tau->vertexCount();
             auto start = Clock::now();
             swept.clear();
-            sweeper.sweep(inputs, weights, options.channels, swept);
+            sweeper.sweep(layerInputs, weights, options.channels, swept);
             if (timings) {
                 timings->sweepSeconds += since(start);
                 start = Clock::now();
             }
-            const bool complete = swept.replay(compressor);
+            // The sweep's output is valid input: the compressor takes it
+            // until it refuses a vertex (a layer ended).
+            const bool complete =
+                compressor.pushValid(swept.depths(), swept.values(), swept.counts(), swept.size()) == swept.size();
             if (timings) timings->compressionSeconds += since(start);
             if (complete) break;
             // The compressor ended a layer: everything up to its depth is in
             // it; the next layer sees what lies beyond.
             buildTransmittances(rays, compressor.layerEndDepth(), timings);
-            inputs = views;
+            layerInputs = inputs;
         }
         const auto start = Clock::now();
         VisibilityFunction result = compressor.finish();
@@ -110,9 +86,13 @@ struct PixelBuilder::Impl {
     bool compressorInUse = false;
     TransmittanceBuilder transmittances;
     Sweeper sweeper;
-    BufferingSink swept;
+    // The sweep's output in double precision, so that compressing it later is
+    // the same as compressing the stream directly (the stages are separated
+    // only to time them).
+    SweptVertices swept;
     std::vector<VisibilityFunction> taus;
-    std::vector<VisibilityView> views;
+    std::vector<SweepInput> prepared;
+    std::vector<const SweepInput*> inputs;
 };
 
 PixelBuilder::PixelBuilder(const CompressorOptions& options) : impl_(std::make_unique<Impl>(options)) {}
@@ -123,10 +103,19 @@ PixelBuilder& PixelBuilder::operator=(PixelBuilder&&) noexcept = default;
 VisibilityFunction PixelBuilder::build(Span<const SampleRay> rays, Span<const double> weights,
                                        PixelTimings* timings) {
     impl_->buildTransmittances(rays, -std::numeric_limits<float>::infinity(), timings);
-    return impl_->run(impl_->views, rays, weights, timings);
+    return impl_->run(impl_->inputs, rays, weights, timings);
 }
 
 VisibilityFunction PixelBuilder::build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
+                                       Span<const double> weights, PixelTimings* timings) {
+    if (transmittances.size() != rays.size())
+        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",
+                                                        rays.size(), " rays"));
+    impl_->prepare(transmittances);
+    return impl_->run(impl_->inputs, rays, weights, timings);
+}
+
+VisibilityFunction PixelBuilder::build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays,
                                        Span<const double> weights, PixelTimings* timings) {
     if (transmittances.size() != rays.size())
         throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",

@@ -37,15 +37,27 @@ VisibilityFunction averageFunctions(std::span<const VisibilityView> children, st
         anyVertices = anyVertices || !c.empty();
     }
     if (!anyVertices) return VisibilityFunction(1, withCounts);
-    std::vector<VisibilityFunction> inputs;
+    // A child of one layer with the channels wanted (and no counts to drop)
+    // is its own light-centre function: it is swept as it is, the others
+    // through a copy.
+    std::vector<VisibilityFunction> copies;
+    copies.reserve(children.size());  // no reallocation: the views of the copies stay valid
+    std::vector<VisibilityView> inputs;
     inputs.reserve(children.size());
-    for (const VisibilityView& c : children) inputs.push_back(lightCentreFunction(c, channels, withCounts));
+    for (const VisibilityView& c : children) {
+        if (c.layerCount() == 1 && c.channels() == channels && (withCounts || !c.hasCounts())) {
+            inputs.push_back(c);
+        } else {
+            copies.push_back(lightCentreFunction(c, channels, withCounts));
+            inputs.push_back(copies.back().view());
+        }
+    }
     CompressorOptions options;
     options.tolerance = tolerance;
     options.channels = channels;
     options.keepCounts = withCounts;
     Compressor compressor(options);
-    sweep(inputs, weights, channels, compressor);
+    Sweeper().sweep(Span<const VisibilityView>(inputs), weights, channels, compressor);
     return compressor.finish();
 }
 

@@ -1,7 +1,9 @@
 #include "dsm/sweep.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <functional>
 #include <vector>
 
 #include "dsm/error.h"
@@ -11,27 +13,39 @@ DSM_NAMESPACE_BEGIN
 
 namespace {
 
-// Heap entry: the depth of an input's next vertex, and the input index. Ties
-// are broken by index so the order of floating-point updates is fixed.
-struct Event {
-    float z;
-    std::uint32_t input;
-};
-bool earlier(const Event& a, const Event& b) { return a.z < b.z || (a.z == b.z && a.input < b.input); }
+// A heap key ordering the inputs' next depths as (depth, input index): the
+// depth's float bits mapped to an unsigned order (-0 as +0, so that equal
+// depths give equal keys) above the index. Ties between inputs at one depth
+// are thus taken in input order, and the order of floating-point updates is
+// fixed; one integer comparison orders two events.
+std::uint64_t eventKey(float z, std::uint32_t input) {
+    std::uint32_t bits = std::bit_cast<std::uint32_t>(z);
+    if (bits == 0x80000000u) bits = 0;
+    bits = (bits & 0x80000000u) ? ~bits : bits | 0x80000000u;
+    return std::uint64_t{bits} << 32 | input;
+}
+std::uint32_t depthOf(std::uint64_t key) { return static_cast<std::uint32_t>(key >> 32); }
+std::uint32_t inputOf(std::uint64_t key) { return static_cast<std::uint32_t>(key); }
 
-// Restores the min-heap order (earliest event on top) below position i after
-// heap[i] changed: the next vertex of the input on top replaces it in one
-// sift-down, where a pop and a push would sift twice.
-void siftDown(std::vector<Event>& heap, std::size_t i) {
-    const std::size_t n = heap.size();
-    const Event moving = heap[i];
-    for (;;) {
-        std::size_t child = 2 * i + 1;
-        if (child >= n) break;
-        if (child + 1 < n && earlier(heap[child + 1], heap[child])) ++child;
-        if (!earlier(heap[child], moving)) break;
+// Replaces the top of the min-heap heap[0, n) by `moving` and restores the
+// heap order, bottom-up (Floyd): the hole at the top sinks to a leaf along the
+// smaller children, one comparison a level, and `moving` rises from there.
+// The input on top usually moves far behind (its next depth comes after most
+// others'), so it rarely rises more than a level; sinking it from the top would
+// compare twice a level. Keys are unique, so the order of events is that of
+// any heap.
+void replaceTop(std::uint64_t* heap, std::size_t n, std::uint64_t moving) {
+    std::size_t i = 0;
+    for (std::size_t child = 1; child < n; child = 2 * i + 1) {
+        if (child + 1 < n && heap[child + 1] < heap[child]) ++child;
         heap[i] = heap[child];
         i = child;
+    }
+    while (i > 0) {
+        const std::size_t parent = (i - 1) / 2;
+        if (!(moving < heap[parent])) break;
+        heap[i] = heap[parent];
+        i = parent;
     }
     heap[i] = moving;
 }
@@ -44,27 +58,143 @@ constexpr double kCancellationLimit = 1e6;
 
 }  // namespace
 
+void SweepInput::assign(const VisibilityView& f) {
+    if (f.channels() != 1 && f.channels() != kMaxChannels)
+        throw Error(ErrorCode::argument, detail::concat("sweep: an input has ", f.channels(), " channels, not 1 or 3"));
+    if (f.layerCount() != 1)
+        throw Error(ErrorCode::argument, detail::concat("sweep: an input has ", f.layerCount(),
+                                                        " layers; the sweep averages single-layer functions"));
+    channels_ = f.channels();
+    vertices_ = f.size();
+    // Room for its distinct depths, grown by doubling: a worker's inputs soon
+    // have room for every input they see, and hold little more.
+    const Span<const float> z = f.depths();
+    std::size_t depths = 0;
+    for (std::size_t i = 0; i < z.size(); ++i) depths += i == 0 || z[i] != z[i - 1];
+    const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels_);
+    if (stepCapacity_ < depths) {
+        stepCapacity_ = std::max(depths, 2 * stepCapacity_);
+        steps_ = std::make_unique_for_overwrite<Step[]>(stepCapacity_);
+    }
+    if (numberCapacity_ < numbers) {
+        numberCapacity_ = std::max(numbers, 2 * numberCapacity_);
+        numbers_ = std::make_unique_for_overwrite<double[]>(numberCapacity_);
+    }
+    size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
+}
+
+template <std::size_t NC>
+std::size_t SweepInput::assignWith(const VisibilityView& f) {
+    const std::size_t n = f.size();
+    const float* z = f.depths().data();
+    const float* v = f.allValues().data();
+    const std::uint32_t* counts = f.hasCounts() ? f.counts().data() : nullptr;
+    Step* out = steps_.get();
+    double* numbers = numbers_.get();
+    // The input's state after the depths read so far, as the sweep sees it.
+    bool atZero[NC] = {};
+    bool sloping = false;
+    std::size_t depths = 0;
+    for (std::size_t first = 0; first < n; ++depths) {
+        const float depth = z[first];
+        if (std::isnan(depth))
+            throw Error(ErrorCode::argument, detail::concat("sweep: an input has depth NaN at vertex ", first));
+        std::uint64_t count = counts ? counts[first] : 0u;
+        std::size_t last = first;
+        while (last + 1 < n && z[last + 1] == depth) {
+            ++last;
+            if (counts) count += counts[last];
+        }
+        if (count > UINT32_MAX)
+            throw Error(ErrorCode::limit, detail::concat("sweep: ", count, " samples at depth ", depth,
+                                                         " exceed the 2^32 - 1 a vertex holds"));
+        const bool more = last + 1 < n;
+        Step step{depth, static_cast<std::uint32_t>(count), 0u};
+        double* valueChange = numbers + depths * 2 * NC;
+        double* slopeAfter = valueChange + NC;
+        bool slopingAfter = false;
+        for (std::size_t c = 0; c < NC; ++c) {
+            const double before = first == 0 ? 1.0 : v[first * NC + c];
+            const double after = v[last * NC + c];
+            valueChange[c] = after - before;
+            const double newSlope =
+                more ? (static_cast<double>(v[(last + 1) * NC + c]) - after) /
+                           (static_cast<double>(z[last + 1]) - static_cast<double>(depth))
+                     : 0.0;
+            slopeAfter[c] = newSlope;
+            slopingAfter = slopingAfter || newSlope != 0.0;
+            if ((after == 0.0) != atZero[c]) {
+                atZero[c] = after == 0.0;
+                step.flags |= (atZero[c] ? kReachesZero : kLeavesZero) << (2 * c);
+            }
+        }
+        if (slopingAfter != sloping) step.flags |= slopingAfter ? kStartsSloping : kStopsSloping;
+        sloping = slopingAfter;
+        out[depths] = step;
+        first = last + 1;
+    }
+    return depths;
+}
+
 struct Sweeper::Impl {
     std::vector<double> w;
     std::vector<std::size_t> next;
-    std::vector<double> slope;
     std::vector<std::uint32_t> sloped;
     std::vector<std::uint32_t> slopedAt;
-    std::vector<unsigned char> atZero;
-    std::vector<Event> heap;  // a binary min-heap under earlier(): the next event on top
+    std::vector<std::uint64_t> heap;  // a binary min-heap of eventKey()s: the next event on top
+    // The inputs given as functions or views, prepared here.
+    std::vector<SweepInput> prepared;
+    std::vector<const SweepInput*> preparedInputs;
+
+    // Checks the arguments, calling checkInput(k) for each input after its
+    // weight, and sets w to the normalised weights. False when there are no
+    // inputs (nothing to sweep).
+    template <class CheckInput>
+    bool normaliseWeights(std::size_t n, Span<const double> weights, int channels, CheckInput&& checkInput);
 
     // Input is VisibilityFunction or VisibilityView (the same accessors).
     template <class Input>
-    std::optional<float> run(Span<const Input> inputs, Span<const double> weights, int channels, VertexSink& sink) {
+    std::optional<float> runFunctions(Span<const Input> inputs, Span<const double> weights, int channels,
+                                      VertexSink& sink) {
+        const bool any = normaliseWeights(inputs.size(), weights, channels, [&](std::size_t k) {
+            if (inputs[k].channels() != channels)
+                throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k].channels(),
+                                                                " channels, expected ", channels));
+            if (inputs[k].layerCount() != 1)
+                throw Error(ErrorCode::argument,
+                            detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
+                                           " layers; the sweep averages single-layer functions"));
+        });
+        if (!any) return std::nullopt;
+        if (prepared.size() < inputs.size()) prepared.resize(inputs.size());  // never shrunk: each keeps its storage
+        preparedInputs.clear();
+        for (std::size_t k = 0; k < inputs.size(); ++k) {
+            prepared[k].assign(VisibilityView(inputs[k]));
+            preparedInputs.push_back(&prepared[k]);
+        }
+        return channels == 1 ? run<1>(Span<const SweepInput* const>(preparedInputs), sink)
+                             : run<kMaxChannels>(Span<const SweepInput* const>(preparedInputs), sink);
+    }
+
+    template <class Sink>
+    std::optional<float> runPrepared(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                                     Sink& sink) {
+        const bool any = normaliseWeights(inputs.size(), weights, channels, [&](std::size_t k) {
+            if (inputs[k]->channels() != channels)
+                throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k]->channels(),
+                                                                " channels, expected ", channels));
+        });
+        if (!any) return std::nullopt;
         // The channel count as a constant lets the compiler unroll the
         // per-channel loops (the arithmetic stays the same).
-        return channels == 1 ? runWith<Input, 1>(inputs, weights, channels, sink)
-                             : runWith<Input, kMaxChannels>(inputs, weights, channels, sink);
+        return channels == 1 ? run<1>(inputs, sink) : run<kMaxChannels>(inputs, sink);
     }
-    // `channels` is NC when valid (checked here, like the rest).
-    template <class Input, std::size_t NC>
-    std::optional<float> runWith(Span<const Input> inputs, Span<const double> weights, int channels,
-                                 VertexSink& sink);
+
+    // The sweep proper, over checked inputs with NC channels and weights w.
+    // Sink is VertexSink, or a final one whose push() the compiler calls
+    // directly.
+    template <std::size_t NC, class Sink>
+    std::optional<float> run(Span<const SweepInput* const> inputs, Sink& sink);
 };
 
 Sweeper::Sweeper() : impl_(std::make_unique<Impl>()) {}
@@ -74,12 +204,32 @@ Sweeper& Sweeper::operator=(Sweeper&&) noexcept = default;
 
 std::optional<float> Sweeper::sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
                                     VertexSink& sink) {
-    return impl_->run(inputs, weights, channels, sink);
+    return impl_->runFunctions(inputs, weights, channels, sink);
 }
 
 std::optional<float> Sweeper::sweep(Span<const VisibilityView> inputs, Span<const double> weights, int channels,
                                     VertexSink& sink) {
-    return impl_->run(inputs, weights, channels, sink);
+    return impl_->runFunctions(inputs, weights, channels, sink);
+}
+
+std::optional<float> Sweeper::sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                                    VertexSink& sink) {
+    return impl_->runPrepared(inputs, weights, channels, sink);
+}
+
+std::optional<float> Sweeper::sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                                    SweptVertices& out) {
+    if (out.channels() != channels)
+        throw Error(ErrorCode::argument, detail::concat("sweep: the output has ", out.channels(),
+                                                        " channels, the inputs ", channels));
+    return impl_->runPrepared(inputs, weights, channels, out);
+}
+
+void SweptVertices::grow() {
+    const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
+    z_.resize(capacity);
+    v_.resize(capacity * channels_);
+    count_.resize(capacity);
 }
 
 std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
@@ -87,39 +237,36 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
     return Sweeper().sweep(inputs, weights, channels, sink);
 }
 
-template <class Input, std::size_t NC>
-std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const double> weights, int channels,
-                                            VertexSink& sink) {
+template <class CheckInput>
+bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, int channels,
+                                     CheckInput&& checkInput) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
-    if (inputs.size() != weights.size())
-        throw Error(ErrorCode::argument,
-                    detail::concat("sweep: ", inputs.size(), " inputs but ", weights.size(), " weights"));
-    if (inputs.size() > UINT32_MAX) throw Error(ErrorCode::argument, "sweep: too many inputs");
+    if (n != weights.size())
+        throw Error(ErrorCode::argument, detail::concat("sweep: ", n, " inputs but ", weights.size(), " weights"));
+    if (n > UINT32_MAX) throw Error(ErrorCode::argument, "sweep: too many inputs");
     double weightSum = 0.0;
-    for (std::size_t k = 0; k < inputs.size(); ++k) {
+    for (std::size_t k = 0; k < n; ++k) {
         if (!std::isfinite(weights[k]) || weights[k] < 0.0)
             throw Error(ErrorCode::argument,
                         detail::concat("sweep: weight ", weights[k], " of input ", k, " is not finite and >= 0"));
-        if (inputs[k].channels() != channels)
-            throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k].channels(),
-                                                            " channels, expected ", channels));
-        if (inputs[k].layerCount() != 1)
-            throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
-                                                            " layers; the sweep averages single-layer functions"));
+        checkInput(k);
         weightSum += weights[k];
     }
-    if (inputs.empty()) return std::nullopt;
+    if (n == 0) return false;
     if (!(weightSum > 0.0) || !std::isfinite(weightSum))
         throw Error(ErrorCode::argument,
                     detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
-
-    const std::size_t n = inputs.size();
-    constexpr std::size_t nc = NC;
     w.resize(n);
     for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
+    return true;
+}
+
+template <std::size_t NC, class Sink>
+std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Sink& sink) {
+    const std::size_t n = inputs.size();
+    constexpr std::size_t nc = NC;
     next.assign(n, 0);
-    slope.assign(n * nc, 0.0);  // current slope of each input, per channel
     // Inputs whose current segment slopes (in any channel of positive weight):
     // an exact recomputation of the slope sum only needs these, and when there
     // are none the sum is exactly 0. Kept in a list with swap-removal.
@@ -128,7 +275,6 @@ std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const
     // Inputs of positive weight whose current value is exactly 0, per channel:
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
-    atZero.assign(n * nc, 0);
     std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
     std::size_t positive = 0;
     for (std::size_t k = 0; k < n; ++k) positive += w[k] > 0.0;
@@ -137,18 +283,19 @@ std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const
     // their depths and sample counts belong to the output.
     heap.clear();
     for (std::size_t k = 0; k < n; ++k)
-        if (!inputs[k].empty()) heap.push_back({inputs[k].z(0), static_cast<std::uint32_t>(k)});
-    std::sort(heap.begin(), heap.end(), earlier);  // sorted is a heap
+        if (!inputs[k]->empty()) heap.push_back(eventKey(inputs[k]->step(0).z, static_cast<std::uint32_t>(k)));
+    std::make_heap(heap.begin(), heap.end(), std::greater<>());  // a min-heap, laid out as replaceTop() reads it
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
     double lastEmitted[kMaxChannels] = {1.0, 1.0, 1.0};
-    double left[kMaxChannels];
+    double left[kMaxChannels] = {1.0, 1.0, 1.0};  // channels beyond NC are never read
     double slopeMagnitude[kMaxChannels] = {0.0, 0.0, 0.0};  // through outSlope since it was exact
     double zCurrent = 0.0;
 
     while (!heap.empty()) {
-        const float z = heap.front().z;
+        const std::uint32_t depth = depthOf(heap.front());
+        const float z = inputs[inputOf(heap.front())]->step(next[inputOf(heap.front())]).z;
         for (std::size_t c = 0; c < nc; ++c) {
             left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
             left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
@@ -157,59 +304,52 @@ std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const
         zCurrent = z;
 
         std::uint64_t count = 0;
-        while (!heap.empty() && heap.front().z == z) {
-            const std::size_t k = heap.front().input;
-            const Input& f = inputs[k];
-            const std::size_t first = next[k];
-            std::size_t last = first;
-            count += f.count(first);
-            while (last + 1 < f.size() && f.z(last + 1) == z) count += f.count(++last);
-            const bool more = last + 1 < f.size();
+        do {
+            const std::uint32_t k = inputOf(heap.front());
+            const SweepInput& f = *inputs[k];
+            const std::size_t i = next[k]++;
+            const SweepInput::Step& step = f.step(i);
+            const double* valueChange = f.changes(i);
+            const double* slopeAfter = valueChange + nc;
+            // The slope before this depth: the one after the input's previous
+            // depth, 0 before its first.
+            const double* slopeBefore = i == 0 ? nullptr : f.changes(i - 1) + nc;
+            const double wk = w[k];
+            count += step.count;
             for (std::size_t c = 0; c < nc; ++c) {
-                const int ch = static_cast<int>(c);
-                const double before = first == 0 ? 1.0 : f.value(first, ch);
-                const double after = f.value(last, ch);
-                value[c] += w[k] * (after - before);
-                const double newSlope =
-                    more ? (static_cast<double>(f.value(last + 1, ch)) - after) /
-                               (static_cast<double>(f.z(last + 1)) - static_cast<double>(z))
-                         : 0.0;
-                double& s = slope[k * nc + c];
-                const double change = w[k] * (newSlope - s);
+                value[c] += wk * valueChange[c];
+                const double change = wk * (slopeAfter[c] - (slopeBefore ? slopeBefore[c] : 0.0));
                 if (change != 0.0) {
                     outSlope[c] += change;
                     slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
                 }
-                s = newSlope;
-                if (w[k] > 0.0 && (after == 0.0) != static_cast<bool>(atZero[k * nc + c])) {
-                    atZero[k * nc + c] = after == 0.0;
-                    if (after == 0.0)
+            }
+            if (step.flags != 0 && wk > 0.0) {
+                for (std::size_t c = 0; c < nc; ++c) {
+                    if (step.flags & (SweepInput::kReachesZero << (2 * c)))
                         ++zeroCount[c];
-                    else
+                    else if (step.flags & (SweepInput::kLeavesZero << (2 * c)))
                         --zeroCount[c];
                 }
+                if (step.flags & SweepInput::kStartsSloping) {
+                    slopedAt[k] = static_cast<std::uint32_t>(sloped.size());
+                    sloped.push_back(k);
+                } else if (step.flags & SweepInput::kStopsSloping) {
+                    const std::uint32_t moved = sloped.back();
+                    sloped[slopedAt[k]] = moved;
+                    slopedAt[moved] = slopedAt[k];
+                    sloped.pop_back();
+                    slopedAt[k] = UINT32_MAX;
+                }
             }
-            bool isSloped = false;
-            for (std::size_t c = 0; c < nc; ++c) isSloped = isSloped || (w[k] > 0.0 && slope[k * nc + c] != 0.0);
-            if (isSloped && slopedAt[k] == UINT32_MAX) {
-                slopedAt[k] = static_cast<std::uint32_t>(sloped.size());
-                sloped.push_back(static_cast<std::uint32_t>(k));
-            } else if (!isSloped && slopedAt[k] != UINT32_MAX) {
-                const std::uint32_t moved = sloped.back();
-                sloped[slopedAt[k]] = moved;
-                slopedAt[moved] = slopedAt[k];
-                sloped.pop_back();
-                slopedAt[k] = UINT32_MAX;
-            }
-            next[k] = last + 1;
-            if (more) {
-                heap.front() = {f.z(last + 1), static_cast<std::uint32_t>(k)};
+            if (i + 1 < f.size()) {
+                replaceTop(heap.data(), heap.size(), eventKey(f.step(i + 1).z, k));
             } else {
-                heap.front() = heap.back();
+                const std::uint64_t last = heap.back();
                 heap.pop_back();
+                if (!heap.empty()) replaceTop(heap.data(), heap.size(), last);
             }
-            if (!heap.empty()) siftDown(heap, 0);
-        }
+        } while (!heap.empty() && depthOf(heap.front()) == depth);
 
         bool step = false;
         for (std::size_t c = 0; c < nc; ++c) {
@@ -218,7 +358,7 @@ std::optional<float> Sweeper::Impl::runWith(Span<const Input> inputs, Span<const
                 slopeMagnitude[c] = 0.0;
             } else if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
                 double exact = 0.0;
-                for (std::uint32_t k : sloped) exact += w[k] * slope[k * nc + c];
+                for (std::uint32_t k : sloped) exact += w[k] * inputs[k]->changes(next[k] - 1)[nc + c];
                 outSlope[c] = exact;
                 slopeMagnitude[c] = std::abs(exact);
             }

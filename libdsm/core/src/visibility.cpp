@@ -27,7 +27,13 @@ std::uint64_t VisibilityFunction::totalCount() const {
 
 void VisibilityFunction::append(float z, const float* values, std::uint32_t count) {
     z_.push_back(z);
-    v_.insert(v_.end(), values, values + channels_);
+    // One or three values (the constructor's check), pushed one by one: a
+    // range insert costs several times as much for so few.
+    v_.push_back(values[0]);
+    if (channels_ == kMaxChannels) {
+        v_.push_back(values[1]);
+        v_.push_back(values[2]);
+    }
     if (withCounts_) count_.push_back(count);
 }
 

@@ -9,6 +9,7 @@
 #include "dsm/compressor.h"
 #include "dsm/transmittance.h"
 #include "dsm/span.h"
+#include "dsm/sweep.h"
 #include "dsm/version.h"
 #include "dsm/visibility.h"
 
@@ -59,6 +60,12 @@ public:
     /// themselves are read only to start the layers after the first (MTSM).
     /// `timings` receives no transmittance time for the given functions.
     VisibilityFunction build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
+                             Span<const double> weights, PixelTimings* timings = nullptr);
+
+    /// The same from the rays' transmittances prepared for the sweep
+    /// (SweepInput::assign), so that a transmittance averaged into several
+    /// pixels is read once.
+    VisibilityFunction build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays,
                              Span<const double> weights, PixelTimings* timings = nullptr);
 
 private:

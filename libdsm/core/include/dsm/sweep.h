@@ -2,8 +2,10 @@
 // (Lokovic & Veach 2000, §5.1, equation 1).
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <optional>
+#include <vector>
 
 #include "dsm/span.h"
 #include "dsm/version.h"
@@ -36,6 +38,99 @@ DSM_NAMESPACE_BEGIN
 DSM_API std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights,
                            int channels, VertexSink& sink);
 
+/// One input of the sweep, read once ahead of it: its vertices grouped by
+/// depth, each depth with the change of value it brings to a sweep and the
+/// slope after it (per channel, unweighted). A function averaged into several pixels
+/// (a sample inside the filters of several) is thus read, and its slopes
+/// divided out, once instead of once per pixel; sweeping it gives exactly
+/// (the same doubles) what sweeping the function gives. Keeps its storage
+/// from one assign() to the next.
+class DSM_API SweepInput {
+public:
+    /// What the sweep meets at one depth of the input.
+    struct Step {
+        float z;
+        std::uint32_t count;  // the counts of the input's vertices at z
+        std::uint32_t flags;  // kStartsSloping, ...: changes of the input's state at z
+    };
+    /// The input's segment after z slopes (in some channel) and the one before did not.
+    static constexpr std::uint32_t kStartsSloping = 1u;
+    /// The input's segment after z is flat and the one before sloped.
+    static constexpr std::uint32_t kStopsSloping = 2u;
+    /// Channel c reaches 0 at z (kReachesZero << 2c) or leaves 0 (kLeavesZero << 2c).
+    static constexpr std::uint32_t kReachesZero = 4u;
+    static constexpr std::uint32_t kLeavesZero = 8u;
+
+    /// Prepares `f`, which must have one layer and 1 or 3 channels, and no NaN
+    /// depth; throws dsm::Error (argument) otherwise.
+    void assign(const VisibilityView& f);
+
+    int channels() const { return channels_; }
+    /// Vertices of the prepared function.
+    std::size_t vertexCount() const { return vertices_; }
+    /// Its distinct depths (in storage order, equal neighbours grouped).
+    std::size_t size() const { return size_; }
+    bool empty() const { return size_ == 0; }
+    const Step& step(std::size_t i) const { return steps_[i]; }
+    /// At depth i, per channel: the change of value (the step's height), then
+    /// the slope after it, each `channels()` doubles.
+    const double* changes(std::size_t i) const { return numbers_.get() + i * 2 * static_cast<std::size_t>(channels_); }
+
+private:
+    template <std::size_t NC>
+    std::size_t assignWith(const VisibilityView& f);
+
+    // Grown (never shrunk, never initialised) to the largest input seen.
+    std::unique_ptr<Step[]> steps_;
+    std::unique_ptr<double[]> numbers_;
+    std::size_t stepCapacity_ = 0;
+    std::size_t numberCapacity_ = 0;
+    std::size_t size_ = 0;
+    std::size_t vertices_ = 0;
+    int channels_ = 1;
+};
+
+/// The sweep's output kept as it comes, values in double precision, for a
+/// caller that hands it on after the sweep (to a compressor, timed apart).
+/// Sweeping into it (the Sweeper overload) stores each vertex without a
+/// virtual call. Keeps its storage from one clear() to the next.
+class DSM_API SweptVertices final : public VertexSink {
+public:
+    /// Vertices of `channels` (1 or 3) values.
+    explicit SweptVertices(int channels) : channels_(static_cast<std::size_t>(channels)) {}
+    bool push(float z, const double* values, std::uint32_t count) override {
+        if (size_ == z_.size()) grow();
+        z_[size_] = z;
+        // One or three values, written out: a loop here becomes a call to memcpy.
+        double* v = v_.data() + size_ * channels_;
+        v[0] = values[0];
+        if (channels_ == 3) {
+            v[1] = values[1];
+            v[2] = values[2];
+        }
+        count_[size_] = count;
+        ++size_;
+        return true;
+    }
+    void clear() { size_ = 0; }
+    int channels() const { return static_cast<int>(channels_); }
+    std::size_t size() const { return size_; }
+    const float* depths() const { return z_.data(); }
+    /// size() * channels() values, vertex-major.
+    const double* values() const { return v_.data(); }
+    const std::uint32_t* counts() const { return count_.data(); }
+
+private:
+    // The arrays are kept at their largest size and written by index.
+    void grow();
+
+    std::size_t channels_;
+    std::size_t size_ = 0;
+    std::vector<float> z_;
+    std::vector<double> v_;
+    std::vector<std::uint32_t> count_;
+};
+
 /// sweep() with its working memory (heap, per-input state) kept between
 /// calls, for a caller that sweeps many pixels on one thread: once its buffers
 /// have grown to the most inputs, sweeping allocates nothing. Same results and
@@ -52,6 +147,12 @@ public:
                                VertexSink& sink);
     std::optional<float> sweep(Span<const VisibilityView> inputs, Span<const double> weights, int channels,
                                VertexSink& sink);
+    /// The same over inputs prepared ahead (each may be swept into many pixels).
+    std::optional<float> sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                               VertexSink& sink);
+    /// The same into `out`, whose channel count must be `channels`.
+    std::optional<float> sweep(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
+                               SweptVertices& out);
 
 private:
     struct Impl;

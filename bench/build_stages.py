@@ -1,0 +1,91 @@
+#!/usr/bin/env python3
+"""Where the instructions of a one-thread dsm-build go, by stage, from a
+callgrind profile (inclusive counts of the functions that make up each stage).
+
+    valgrind --tool=callgrind --callgrind-out-file=build.cg \\
+        build/tools/dsm-build examples/hairball.json -r 128 -s 16 -j 1 -q -o x.dsm
+    bench/build_stages.py build.cg 262144        # samples: 128 * 128 * 16
+
+Prints a Markdown table: instructions per sample and share of the build
+(buildMap). "After sampling" is transmittance + sweep + compression + writing;
+the sweep includes buffering its output for the compressor. Needs
+callgrind_annotate (valgrind) on PATH."""
+import re
+import subprocess
+import sys
+
+
+def annotate(profile, *options):
+    return subprocess.run(["callgrind_annotate", "--inclusive=yes", "--show-percs=no", "--threshold=100",
+                           *options, profile], capture_output=True, text=True, check=True).stdout
+
+
+def number(text):
+    return int(text.replace(",", ""))
+
+
+def largest(flat, name):
+    """The inclusive count of a function: the largest of its entries (callgrind
+    lists inlined code under the file it comes from as well)."""
+    best = 0
+    for line in flat.splitlines():
+        m = re.match(r"\s*([\d,]+)\s+(.*)", line)
+        if m and name in m.group(2):
+            best = max(best, number(m.group(1)))
+    return best
+
+
+def called_from(tree, callee, caller):
+    """What `callee` costs when called by `caller` (callgrind_annotate --tree=caller)."""
+    total, block = 0, []
+    for line in tree.splitlines():
+        if not line.strip():
+            block = []
+            continue
+        block.append(line)
+        m = re.match(r"\s*([\d,]+)\s+\*\s+(.*)", line)
+        if m and callee in m.group(2):
+            for b in block[:-1]:
+                c = re.match(r"\s*([\d,]+)\s+<\s+(.*)", b)
+                if c and caller in c.group(2):
+                    total += number(c.group(1))
+            block = []
+    return total
+
+
+def main():
+    if len(sys.argv) != 3:
+        sys.exit(__doc__)
+    profile, samples = sys.argv[1], int(sys.argv[2])
+    flat = annotate(profile)
+    tree = annotate(profile, "--tree=caller")
+    whole = number(re.search(r"([\d,]+)\s+PROGRAM TOTALS", flat).group(1))
+    build = largest(flat, "dsm::v0::buildMap(dsm::v0::Scene const&")
+    # The sweep of a build's pixels: over prepared inputs (this version) or
+    # over views of the transmittances (before).
+    sweep = max(largest(flat, "Sweeper::sweep(dsm::v0::Span<dsm::v0::SweepInput const* const>, "
+                              "dsm::v0::Span<double const>, int, dsm::v0::SweptVertices&"),
+                largest(flat, "Sweeper::sweep(dsm::v0::Span<dsm::v0::VisibilityView const>, "
+                              "dsm::v0::Span<double const>, int, dsm::v0::VertexSink&"))
+    stages = [
+        ("bucketing primitives into tiles", largest(flat, "ScanlineHider::ScanlineHider(")),
+        ("sampling: crossings of the samples", largest(flat, "ScanlineHider::tileHits(")),
+        ("transmittance (built, and prepared for the sweep)",
+         largest(flat, "TransmittanceBuilder::build(") + called_from(tree, "SweepInput::assign(", "buildMap")),
+        ("sweep (filtering, output buffered)", sweep),
+        ("compression", largest(flat, "Compressor::pushValid(float const*, double const*")
+         + called_from(tree, "Compressor::finish()", "PixelBuilder")),
+        ("writing tiles", largest(flat, "MapWriter::writeTile(") + largest(flat, "MapWriter::finish()")),
+    ]
+    after = sum(v for _, v in stages[2:])
+    print("| stage (inclusive) | per sample | share of the build |")
+    print("|---|---:|---:|")
+    print(f"| whole process | {whole / samples:,.0f} | |")
+    print(f"| the build (`buildMap`) | {build / samples:,.0f} | 100 % |")
+    for name, v in stages:
+        print(f"| {name} | {v / samples:,.0f} | {100 * v / build:.1f} % |")
+    print(f"| **after sampling** (transmittance to writing) | {after / samples:,.0f} | **{100 * after / build:.1f} %** |")
+
+
+if __name__ == "__main__":
+    main()
