@@ -9,6 +9,7 @@
 
 #include "byte_io.h"
 #include "dsm/error.h"
+#include "dsm/names.h"
 #include "text.h"
 
 namespace dsm::format {
@@ -254,6 +255,12 @@ TileSummary decodeTileEntry(const std::uint8_t* data) {
     return t;
 }
 
+std::uint32_t requiredFlagsOf(const MapInfo& info) {
+    return (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u) |
+           (info.codedTiles ? kRequiredCodedTiles : 0u) |
+           (info.codedTiles && info.predictedDepths ? kRequiredPredictedDepths : 0u);
+}
+
 Header headerFromInfo(const MapInfo& info, std::uint16_t minor) {
     Header h;
     h.versionMinor = minor;
@@ -262,9 +269,7 @@ Header headerFromInfo(const MapInfo& info, std::uint16_t minor) {
     h.tileSize = info.tileSize;
     h.channels = static_cast<std::uint8_t>(info.channels);
     h.maxLayers = static_cast<std::uint8_t>(info.maxLayers);
-    h.requiredFlags = (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u) |
-                      (info.codedTiles ? kRequiredCodedTiles : 0u) |
-                      (info.codedTiles && info.predictedDepths ? kRequiredPredictedDepths : 0u);
+    h.requiredFlags = requiredFlagsOf(info);
     h.codec = static_cast<std::uint8_t>(info.codec);
     h.codecLevel = static_cast<std::uint8_t>(std::max(info.codecLevel, 0));
     h.areaLightRadius = info.areaLightRadius;
@@ -304,3 +309,18 @@ void infoFromHeader(const Header& h, MapInfo& info) {
 }
 
 }  // namespace dsm::format
+
+DSM_NAMESPACE_BEGIN
+
+// Declared in dsm/names.h; here beside the flags' bits (a reader refuses
+// unknown flags and HAS_LAYERS that disagrees with maxLayers, so the flags
+// follow from MapInfo).
+std::vector<std::string> requiredFlagNames(const MapInfo& info) {
+    const std::uint32_t flags = format::requiredFlagsOf(info);
+    std::vector<std::string> names;
+    for (const format::NamedFlag& f : format::kRequiredFlagNames)
+        if (flags & f.bit) names.emplace_back(f.name);
+    return names;
+}
+
+DSM_NAMESPACE_END
