@@ -5,8 +5,6 @@
 #include <cmath>
 #include <cstring>
 
-#include <zlib.h>
-
 #include "byte_io.h"
 #include "dsm/error.h"
 #include "dsm/names.h"
@@ -17,17 +15,6 @@ namespace dsm::format {
 using detail::ByteReader;
 using detail::ByteWriter;
 using detail::concat;
-
-std::uint32_t crc32(const std::uint8_t* data, std::size_t size) {
-    uLong crc = ::crc32(0L, Z_NULL, 0);
-    while (size > 0) {
-        const uInt chunk = static_cast<uInt>(std::min<std::size_t>(size, 1u << 30));
-        crc = ::crc32(crc, data, chunk);
-        data += chunk;
-        size -= chunk;
-    }
-    return static_cast<std::uint32_t>(crc);
-}
 
 std::vector<std::uint8_t> encodeHeader(const Header& h) {
     std::vector<std::uint8_t> out;
