@@ -94,16 +94,35 @@ public:
         if (end_ - at_ >= 5) return nextUnchecked();
         return nextChecked();
     }
-    /// Calls `f` with each of the next `count` (< 2^60) values: the bounds
-    /// checked once for the run when it cannot reach the end (5 bytes a value
-    /// at most), else value by value. The hot path of tile decoding.
+    /// Calls `f(i, value)` for each of the next `count` (< 2^60) values, i
+    /// from 0: the bounds checked once for the run when it cannot reach the
+    /// end (5 bytes a value at most), else value by value. The hot path of
+    /// tile decoding.
     template <class F>
     void forEach(std::size_t count, F&& f) {
         if (5 * count <= remaining()) {
-            for (std::size_t i = 0; i < count; ++i) f(nextUnchecked());
+            for (std::size_t i = 0; i < count; ++i) f(i, nextUnchecked());
         } else {
-            for (std::size_t i = 0; i < count; ++i) f(next());
+            for (std::size_t i = 0; i < count; ++i) f(i, next());
         }
+    }
+    /// When the next `count` (<= 8) values are each one byte (below 128) and
+    /// 8 bytes remain: moves past them and sets `values` to those bytes, the
+    /// first lowest; otherwise false, and nothing moves.
+    bool singleBytes(std::size_t count, std::uint64_t& values) {
+        if (remaining() < 8) return false;
+        std::uint64_t word;
+        if constexpr (std::endian::native == std::endian::little) {
+            std::memcpy(&word, at_, 8);
+        } else {
+            word = 0;
+            for (int i = 0; i < 8; ++i) word |= static_cast<std::uint64_t>(at_[i]) << (8 * i);
+        }
+        const std::uint64_t mask = count >= 8 ? ~std::uint64_t(0) : (std::uint64_t(1) << (8 * count)) - 1;
+        if (word & mask & 0x8080808080808080u) return false;
+        values = word & mask;
+        at_ += count;
+        return true;
     }
     std::uint8_t byte() {
         if (at_ == end_) {

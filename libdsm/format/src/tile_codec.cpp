@@ -9,6 +9,10 @@
 #include <zlib.h>
 #include <zstd.h>
 
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+
 #include "byte_io.h"
 #include "dsm/error.h"
 #include "format_layout.h"
@@ -378,38 +382,86 @@ constexpr std::uint32_t kInfinityBits = 0x7F800000;  // bits(+inf): finite non-n
 // step; otherwise float32 bits. A run's keys stay in [0, one] exactly when its
 // differences add up to no more than `one` (each is non-negative), which is
 // checked once for the run.
+#ifdef __SSE2__
+// A run of at most 8 one-byte differences (`bytes`, the first lowest, zero
+// past the run) from `one`: all 8 keys at once, as floats, into out[0..7] (the
+// lanes past the run repeat its last key, for the caller to overwrite).
+// Returns the differences' sum.
 template <bool Quantised>
-[[gnu::always_inline]] inline void decodeValueRun(VarintReader& r, std::uint32_t n, std::uint32_t c, std::uint32_t one, float step, float*& out,
-                    bool& suspect) {
+[[gnu::always_inline]] inline std::uint32_t storeByteRun(std::uint64_t bytes, std::uint32_t one, float step,
+                                                         float* out) {
+    const __m128i zero = _mm_setzero_si128();
+    __m128i sum = _mm_unpacklo_epi8(_mm_cvtsi64_si128(static_cast<long long>(bytes)), zero);  // 8 x u16
+    sum = _mm_add_epi16(sum, _mm_slli_si128(sum, 2));  // running sums: at most 8 * 127
+    sum = _mm_add_epi16(sum, _mm_slli_si128(sum, 4));
+    sum = _mm_add_epi16(sum, _mm_slli_si128(sum, 8));
+    const __m128i ones = _mm_set1_epi32(static_cast<int>(one));
+    const __m128i low = _mm_sub_epi32(ones, _mm_unpacklo_epi16(sum, zero));
+    const __m128i high = _mm_sub_epi32(ones, _mm_unpackhi_epi16(sum, zero));
+    if constexpr (Quantised) {  // as static_cast<float>(int32) * step, lane by lane
+        const __m128 s = _mm_set1_ps(step);
+        _mm_storeu_ps(out, _mm_mul_ps(_mm_cvtepi32_ps(low), s));
+        _mm_storeu_ps(out + 4, _mm_mul_ps(_mm_cvtepi32_ps(high), s));
+    } else {
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(out), low);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(out + 4), high);
+    }
+    return static_cast<std::uint32_t>(_mm_extract_epi16(sum, 7));
+}
+#endif
+
+// `valuesEnd`: the end of the tile's values, up to which a run may write
+// past its own (what follows is decoded later).
+template <bool Quantised>
+[[gnu::always_inline]] inline void decodeValueRun(VarintReader& r, std::uint32_t n, std::uint32_t c, std::uint32_t one,
+                                                  float step, float*& out, const float* valuesEnd, bool& suspect) {
     const auto toFloat = [step](std::uint32_t key) {
         // A key of a quantised value is at most 2^24: converted as a signed
         // 32-bit integer, which is one instruction.
         if constexpr (Quantised) return static_cast<float>(static_cast<std::int32_t>(key)) * step;
         else return std::bit_cast<float>(key);
     };
-    float* at = out;
+    float* const at = out;
     if (c == 1) {
         std::uint32_t key = one;
-        std::uint64_t fall = 0;
-        r.forEach(n, [&](std::uint32_t d) {
-            fall += d;
-            key -= d;
-            *at++ = toFloat(key);
-        });
-        suspect |= fall > one;
+        std::uint64_t bytes;
+        if (n <= 8 && r.singleBytes(n, bytes)) {
+            // The common run: short, each difference one byte.
+#ifdef __SSE2__
+            if (valuesEnd - at >= 8) {
+                suspect |= storeByteRun<Quantised>(bytes, one, step, at) > one;
+                out = at + n;
+                return;
+            }
+#endif
+            for (std::uint32_t i = 0; i < n; ++i, bytes >>= 8) {
+                key -= static_cast<std::uint32_t>(bytes & 0xFF);
+                at[i] = toFloat(key);
+            }
+            suspect |= key > one;  // fell below 0: by at most 8 * 127, so wrapped above `one`
+        } else {
+            std::uint64_t fall = 0;
+            r.forEach(n, [&](std::size_t i, std::uint32_t d) {
+                fall += d;
+                key -= d;
+                at[i] = toFloat(key);
+            });
+            suspect |= fall > one;
+        }
+        out = at + n;
     } else {
         std::uint32_t key[3] = {one, one, one};
         std::uint64_t fall[3] = {0, 0, 0};
         std::uint32_t k = 0;
-        r.forEach(std::size_t(n) * 3, [&](std::uint32_t d) {
+        r.forEach(std::size_t(n) * 3, [&](std::size_t i, std::uint32_t d) {
             fall[k] += d;
             key[k] -= d;
-            *at++ = toFloat(key[k]);
+            at[i] = toFloat(key[k]);
             k = k == 2 ? 0 : k + 1;
         });
         suspect |= fall[0] > one || fall[1] > one || fall[2] > one;
+        out = at + std::size_t(n) * 3;
     }
-    out = at;
 }
 
 template <bool Quantised>
@@ -417,13 +469,14 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
                   const std::uint32_t* layerStarts, float* v, std::uint32_t one, float step, bool& suspect) {
     VarintReader r = reader;  // local copies, kept in registers
     bool fell = false;
+    const float* const valuesEnd = v + records[pixels].valueStart;
     for (std::size_t p = 0; p < pixels; ++p) {
         const PixelRecord& a = records[p];
         const PixelRecord& b = records[p + 1];
         const std::uint32_t n = b.vertexStart - a.vertexStart;
         float* out = v + a.valueStart;
         if (a.layerStart == b.layerStart) {  // one layer: one run
-            decodeValueRun<Quantised>(r, n, a.channels, one, step, out, fell);
+            decodeValueRun<Quantised>(r, n, a.channels, one, step, out, valuesEnd, fell);
             continue;
         }
         std::uint32_t begin = 0;
@@ -431,7 +484,7 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
             // Layer starts out of order were flagged when read; clamped here so
             // that the run stays within the pixel.
             const std::uint32_t end = l < b.layerStart ? std::min(std::max(layerStarts[l], begin), n) : n;
-            decodeValueRun<Quantised>(r, end - begin, a.channels, one, step, out, fell);
+            decodeValueRun<Quantised>(r, end - begin, a.channels, one, step, out, valuesEnd, fell);
             begin = end;
         }
     }
@@ -457,10 +510,10 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
 [[gnu::always_inline]] inline std::uint64_t decodeDepthSteps(VarintReader& r, float* z, std::uint32_t from,
                                                              std::uint32_t to) {
     std::uint64_t bits = std::bit_cast<std::uint32_t>(z[from]);
-    float* at = z + from + 1;
-    r.forEach(to - from - 1, [&](std::uint32_t step) {
+    float* const at = z + from + 1;
+    r.forEach(to - from - 1, [&](std::size_t i, std::uint32_t step) {
         bits += step;
-        *at++ = std::bit_cast<float>(static_cast<std::uint32_t>(bits));
+        at[i] = std::bit_cast<float>(static_cast<std::uint32_t>(bits));
     });
     return bits;
 }
@@ -478,8 +531,7 @@ void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std
         std::uint32_t first = previousFirst, last = previousLast;
         if (b - a > 1) {
             std::uint32_t codes[2];
-            int k = 0;
-            r.forEach(2, [&](std::uint32_t code) { codes[k++] = code; });
+            r.forEach(2, [&](std::size_t i, std::uint32_t code) { codes[i] = code; });
             first += unzigzag(codes[0]);
             last += unzigzag(codes[1]);
         } else {
@@ -553,7 +605,7 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
     std::uint64_t total = 0;
     std::uint32_t most = 0;
     PixelRecord* record = records.data();
-    r.forEach(pixels, [&](std::uint32_t n) {
+    r.forEach(pixels, [&](std::size_t, std::uint32_t n) {
         total += n;
         most = std::max(most, n);
         (++record)->vertexStart = static_cast<std::uint32_t>(total);
@@ -603,8 +655,8 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
         decodeValues<true>(r, records.data(), pixels, layerStarts, tile.values(),
                            static_cast<std::uint32_t>(1.0 / step), static_cast<float>(step), checks.suspect);
     if (layout.hasCounts) {
-        std::uint32_t* counts = tile.counts();
-        r.forEach(summary.vertexCount, [&](std::uint32_t count) { *counts++ = count; });
+        std::uint32_t* const counts = tile.counts();
+        r.forEach(summary.vertexCount, [&](std::size_t i, std::uint32_t count) { counts[i] = count; });
     }
     if (!r.ok()) fail("tile data is truncated", ErrorCode::corrupt);
     if (!r.atEnd())
