@@ -4,6 +4,7 @@
 #include <bit>
 #include <functional>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include <zlib.h>
@@ -498,7 +499,7 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
 // A pixel's first and last depth, noted for the checks of the whole tile.
 [[gnu::always_inline]] inline void noteDepthEnds(std::uint32_t first, std::uint32_t last, DecodeChecks& checks) {
     ++checks.nonEmptyPixels;
-    checks.suspect |= last < first || last >= kInfinityBits;
+    checks.suspect |= last < first;  // a last depth of bits(+inf) or above: by maxBits, once for the tile
     checks.minBits = std::min(checks.minBits, first);
     checks.maxBits = std::max(checks.maxBits, last);
 }
@@ -550,6 +551,7 @@ void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std
         checks.suspect |= decodeDepthSteps(r, z, a, b - 1) > std::bit_cast<std::uint32_t>(z[b - 1]);
     }
     reader = r;
+    checks.suspect |= checks.maxBits >= kInfinityBits;
     tileChecks = checks;
 }
 
@@ -571,7 +573,22 @@ void decodeDepthsByPixel(VarintReader& reader, const PixelRecord* records, std::
         noteDepthEnds(first, static_cast<std::uint32_t>(last), checks);
     }
     reader = r;
+    checks.suspect |= checks.maxBits >= kInfinityBits;
     tileChecks = checks;
+}
+
+// Whether the `count` bytes at `bytes` all equal `value` (8 compared at once).
+bool allBytesAre(const std::uint8_t* bytes, std::size_t count, std::uint8_t value) {
+    const std::uint64_t word = 0x0101010101010101u * value;
+    std::size_t i = 0;
+    for (; i + 8 <= count; i += 8) {
+        std::uint64_t w;
+        std::memcpy(&w, bytes + i, 8);
+        if (w != word) return false;
+    }
+    for (; i < count; ++i)
+        if (bytes[i] != value) return false;
+    return true;
 }
 
 // Reads a coded tile's vertex counts again one by one, and fails naming the
@@ -615,10 +632,16 @@ DecodedTile parseCodedTile(std::span<const std::uint8_t> raw, const TileSummary&
     std::uint64_t layerTotal = 0, valueTotal = 0;
     if (r.remaining() >= 2 * pixels) {
         const std::uint8_t* const flags = r.bytes(pixels);
-        for (std::size_t p = 0; p < pixels; ++p)
-            if (flags[p] != 0) readPixelFlag(flags[p], records[p], p, shape, layout, fail);
         const std::uint8_t* layers = r.bytes(pixels);
-        readLayerCounts([&] { return *layers++; }, records, shape, layout, fail, layerTotal, valueTotal);
+        if (allBytesAre(flags, pixels, 0) && allBytesAre(layers, pixels, 1)) {
+            // The common tile: monochrome pixels of one layer, a value a vertex.
+            for (std::size_t p = 1; p <= pixels; ++p) records[p].valueStart = records[p].vertexStart;
+            valueTotal = total;
+        } else {
+            for (std::size_t p = 0; p < pixels; ++p)
+                if (flags[p] != 0) readPixelFlag(flags[p], records[p], p, shape, layout, fail);
+            readLayerCounts([&] { return *layers++; }, records, shape, layout, fail, layerTotal, valueTotal);
+        }
     } else {  // too short: byte by byte, a missing byte read as 0
         for (std::size_t p = 0; p < pixels; ++p)
             if (const std::uint8_t flags = r.byte(); flags != 0) readPixelFlag(flags, records[p], p, shape, layout, fail);
