@@ -101,6 +101,7 @@ public:
     template <class F>
     void forEach(std::size_t count, F&& f) {
         if (5 * count <= remaining()) {
+#pragma GCC unroll 4
             for (std::size_t i = 0; i < count; ++i) f(i, nextUnchecked());
         } else {
             for (std::size_t i = 0; i < count; ++i) f(i, next());
