@@ -205,7 +205,7 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
     }
 
     // Sizes: as stored, and the same pixels as 1.0 tiles at the map's zlib level.
-    const int zlibLevel = info.codecLevel >= 0 ? info.codecLevel : 6;
+    const int zlibLevel = info.codec == dsm::TileCodec::Zlib && info.codecLevel >= 0 ? info.codecLevel : 6;
     std::vector<std::uint64_t> oldBytes(info.levels.size(), 0), recodedBytes(info.levels.size(), 0);
     std::vector<dsm::format::EncodedTile> oldTiles;
     for (const StoredTile& t : tiles) {
@@ -222,8 +222,9 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
         recodedBytes[t.level] += dsm::format::encodeTile(pixels, coded, zlibLevel).stored.size();
     }
     std::uint64_t total = 0, oldTotal = 0, recodedTotal = 0;
-    std::printf("%s: format %d.%d, %s tiles, zlib level %d\n", path.c_str(), info.versionMajor, info.versionMinor,
-                info.codedTiles ? "coded" : "1.0", zlibLevel);
+    std::printf("%s: format %d.%d, %s tiles, %s level %d (1.0 tiles here at zlib level %d)\n", path.c_str(),
+                info.versionMajor, info.versionMinor, info.codedTiles ? "coded" : "1.0",
+                info.codec == dsm::TileCodec::Zstd ? "zstd" : "zlib", info.codecLevel, zlibLevel);
     std::printf("  level  tolerance  value step  vertices     bytes     1.0 bytes  ratio  this build's coding\n");
     for (unsigned l = 0; l < info.levels.size(); ++l) {
         const dsm::LevelInfo& L = info.levels[l];
@@ -252,21 +253,26 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
     std::vector<std::uint8_t> scratch;
     const dsm::ReaderOptions limits;
     std::size_t decodedVertices = 0;
+    // (A zstd map: against zstd's decompression alone.)
+    const bool zstd = info.codec == dsm::TileCodec::Zstd;
     const auto inflateAll = [&] {
         for (const StoredTile& t : tiles) {
             if (t.summary.storedBytes == t.summary.rawBytes) continue;  // stored: nothing to inflate
             scratch.resize(t.summary.rawBytes);
             uLongf size = t.summary.rawBytes;
-            uncompress(scratch.data(), &size, t.bytes.data(), static_cast<uLong>(t.bytes.size()));
+            if (zstd) ZSTD_decompress(scratch.data(), scratch.size(), t.bytes.data(), t.bytes.size());
+            else uncompress(scratch.data(), &size, t.bytes.data(), static_cast<uLong>(t.bytes.size()));
         }
     };
     const auto decodeAll = [&] {
         decodedVertices = 0;
         for (const StoredTile& t : tiles) {
-            const dsm::format::DecodedTile d = dsm::format::decodeTile(
-                t.bytes, t.summary, t.width, t.height,
-                {info.channels, info.hasCounts, info.maxLayers, info.codedTiles, info.levels[t.level].valueStep},
-                limits, "bench", t.originX, t.originY);
+            dsm::format::TileLayout layout{info.channels, info.hasCounts, info.maxLayers, info.codedTiles,
+                                           info.levels[t.level].valueStep};
+            layout.codec = info.codec;
+            layout.predictedDepths = info.predictedDepths;
+            const dsm::format::DecodedTile d = dsm::format::decodeTile(t.bytes, t.summary, t.width, t.height, layout,
+                                                                       limits, "bench", t.originX, t.originY);
             decodedVertices += d.records()[d.pixelCount()].vertexStart;
         }
     };
@@ -275,10 +281,11 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
         inflateSeconds = std::min(inflateSeconds, bestSeconds(1, inflateAll));
         decodeSeconds = std::min(decodeSeconds, bestSeconds(1, decodeAll));
     }
-    std::printf("  decode of %zu tiles (%llu vertices): %.2f ms; zlib inflate alone of the same bytes: %.2f ms; "
-                "decode throughput / inflate throughput = %.3f\n",
+    std::printf("  decode of %zu tiles (%llu vertices): %.2f ms; %s alone of the same bytes: %.2f ms; "
+                "decode throughput / %s throughput = %.3f\n",
                 tiles.size(), static_cast<unsigned long long>(decodedVertices), decodeSeconds * 1e3,
-                inflateSeconds * 1e3, decodeSeconds > 0.0 ? inflateSeconds / decodeSeconds : 0.0);
+                zstd ? "zstd decompression" : "zlib inflate", inflateSeconds * 1e3, zstd ? "zstd" : "inflate",
+                decodeSeconds > 0.0 ? inflateSeconds / decodeSeconds : 0.0);
 
     if (decodeOnly) return;
     const double oldDecodeSeconds = bestSeconds(rounds, [&] {
@@ -292,7 +299,7 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
     std::printf("  decode of the same pixels as 1.0 tiles: %.2f ms (coded / 1.0 decode time %.3f)\n",
                 oldDecodeSeconds * 1e3, oldDecodeSeconds > 0.0 ? decodeSeconds / oldDecodeSeconds : 0.0);
 
-    measureZstd(tiles, inflateSeconds, rounds);
+    if (!zstd) measureZstd(tiles, inflateSeconds, rounds);
     measureColdReads(path, tiles);
 }
 
