@@ -10,7 +10,9 @@
 //     decompression time against zlib's inflate (same run);
 //   - a cold read + decode per level-0 tile: the file's pages dropped from the
 //     page cache (posix_fadvise DONTNEED) before each tile, which is then read
-//     and decoded through a map without a tile cache; and the same warm.
+//     and decoded through a map without a tile cache; beside it, in turn, the
+//     device's floor: a cold pread() of the same stored bytes alone; and the
+//     same two warm.
 //
 //   bench_tile_codec [--smoke] [--decode-only] [--rounds=N] MAP...
 //     --smoke: a small generated map; --decode-only: the decode and inflate
@@ -117,38 +119,66 @@ void measureZstd(const std::vector<StoredTile>& tiles, double inflateSeconds, in
     ZSTD_freeCCtx(cctx);
 }
 
-// Microseconds to read and decode one level-0 tile through a map without a
-// tile cache, each tile once; with `cold`, the file's pages are dropped from
-// the page cache before each tile (not timed), so every read reaches the disk.
-std::vector<double> tileReadMicroseconds(const std::string& path, const std::vector<StoredTile>& tiles, bool cold) {
+// Microseconds per level-0 tile, each tile once: a read + decode through a
+// map without a tile cache, and a plain pread() of the same stored bytes
+// (the device's floor), the two in turn (which goes first alternates from
+// tile to tile). With `cold`, the file's pages are dropped from the page
+// cache (posix_fadvise DONTNEED, not timed) before each, so that every read
+// reaches the disk.
+struct TileReadTimes {
+    std::vector<double> decoded, pread;
+};
+TileReadTimes tileReadMicroseconds(const std::string& path, const std::vector<StoredTile>& tiles, bool cold) {
     dsm::ReaderOptions options;
     options.cache = dsm::TileCache::create(0);
     const auto map = dsm::DeepShadowMap::open(path, options);
     const int fd = ::open(path.c_str(), O_RDONLY);
     if (fd < 0) throw std::runtime_error("cannot open " + path);
-    std::vector<double> times;
+    TileReadTimes times;
+    std::vector<std::uint8_t> bytes;
+    bool preadFirst = false;
     for (const StoredTile& t : tiles) {
         if (t.level != 0) continue;
-        if (cold) posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
-        const auto start = Clock::now();
-        const dsm::PixelFunction f = map->pixel(0, t.originX, t.originY);
-        times.push_back(std::chrono::duration<double, std::micro>(Clock::now() - start).count());
+        preadFirst = !preadFirst;
+        for (int k = 0; k < 2; ++k) {
+            if (cold) posix_fadvise(fd, 0, 0, POSIX_FADV_DONTNEED);
+            const auto start = Clock::now();
+            if ((k == 0) == preadFirst) {
+                bytes.resize(t.summary.storedBytes);
+                if (::pread(fd, bytes.data(), bytes.size(), static_cast<off_t>(t.summary.offset)) !=
+                    static_cast<ssize_t>(bytes.size()))
+                    throw std::runtime_error("cannot read a tile of " + path);
+                times.pread.push_back(std::chrono::duration<double, std::micro>(Clock::now() - start).count());
+            } else {
+                const dsm::PixelFunction f = map->pixel(0, t.originX, t.originY);
+                times.decoded.push_back(std::chrono::duration<double, std::micro>(Clock::now() - start).count());
+            }
+        }
     }
     ::close(fd);
     return times;
 }
 
 void measureColdReads(const std::string& path, const std::vector<StoredTile>& tiles) {
-    const auto report = [](const char* what, std::vector<double> times) {
-        if (times.empty()) return;
+    const auto median = [](std::vector<double> times) {
+        std::sort(times.begin(), times.end());
+        return times.empty() ? 0.0 : times[times.size() / 2];
+    };
+    const auto mean = [](const std::vector<double>& times) {
         double sum = 0.0;
         for (double t : times) sum += t;
-        std::sort(times.begin(), times.end());
-        std::printf("  %s tile read + decode, per level-0 tile (%zu tiles): mean %.1f us, median %.1f us\n", what,
-                    times.size(), sum / double(times.size()), times[times.size() / 2]);
+        return times.empty() ? 0.0 : sum / double(times.size());
     };
-    report("cold (page cache dropped before each tile)", tileReadMicroseconds(path, tiles, true));
-    report("warm (file in the page cache)", tileReadMicroseconds(path, tiles, false));
+    for (const bool cold : {true, false}) {
+        const TileReadTimes times = tileReadMicroseconds(path, tiles, cold);
+        if (times.decoded.empty()) return;
+        const double decoded = median(times.decoded), floor = median(times.pread);
+        std::printf("  %s, per level-0 tile (%zu tiles): read + decode median %.1f us (mean %.1f); pread of the same "
+                    "bytes alone median %.1f us (mean %.1f); read + decode / pread = %.2f\n",
+                    cold ? "cold (page cache dropped before each read)" : "warm (file in the page cache)",
+                    times.decoded.size(), decoded, mean(times.decoded), floor, mean(times.pread),
+                    floor > 0.0 ? decoded / floor : 0.0);
+    }
 }
 
 void measure(const std::string& path, int rounds, bool decodeOnly) {
@@ -175,7 +205,7 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
     }
 
     // Sizes: as stored, and the same pixels as 1.0 tiles at the map's zlib level.
-    const int zlibLevel = info.codecLevel >= 0 ? info.codecLevel : 6;
+    const int zlibLevel = info.codec == dsm::TileCodec::Zlib && info.codecLevel >= 0 ? info.codecLevel : 6;
     std::vector<std::uint64_t> oldBytes(info.levels.size(), 0), recodedBytes(info.levels.size(), 0);
     std::vector<dsm::format::EncodedTile> oldTiles;
     for (const StoredTile& t : tiles) {
@@ -192,8 +222,9 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
         recodedBytes[t.level] += dsm::format::encodeTile(pixels, coded, zlibLevel).stored.size();
     }
     std::uint64_t total = 0, oldTotal = 0, recodedTotal = 0;
-    std::printf("%s: format %d.%d, %s tiles, zlib level %d\n", path.c_str(), info.versionMajor, info.versionMinor,
-                info.codedTiles ? "coded" : "1.0", zlibLevel);
+    std::printf("%s: format %d.%d, %s tiles, %s level %d (1.0 tiles here at zlib level %d)\n", path.c_str(),
+                info.versionMajor, info.versionMinor, info.codedTiles ? "coded" : "1.0",
+                info.codec == dsm::TileCodec::Zstd ? "zstd" : "zlib", info.codecLevel, zlibLevel);
     std::printf("  level  tolerance  value step  vertices     bytes     1.0 bytes  ratio  this build's coding\n");
     for (unsigned l = 0; l < info.levels.size(); ++l) {
         const dsm::LevelInfo& L = info.levels[l];
@@ -222,21 +253,26 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
     std::vector<std::uint8_t> scratch;
     const dsm::ReaderOptions limits;
     std::size_t decodedVertices = 0;
+    // (A zstd map: against zstd's decompression alone.)
+    const bool zstd = info.codec == dsm::TileCodec::Zstd;
     const auto inflateAll = [&] {
         for (const StoredTile& t : tiles) {
             if (t.summary.storedBytes == t.summary.rawBytes) continue;  // stored: nothing to inflate
             scratch.resize(t.summary.rawBytes);
             uLongf size = t.summary.rawBytes;
-            uncompress(scratch.data(), &size, t.bytes.data(), static_cast<uLong>(t.bytes.size()));
+            if (zstd) ZSTD_decompress(scratch.data(), scratch.size(), t.bytes.data(), t.bytes.size());
+            else uncompress(scratch.data(), &size, t.bytes.data(), static_cast<uLong>(t.bytes.size()));
         }
     };
     const auto decodeAll = [&] {
         decodedVertices = 0;
         for (const StoredTile& t : tiles) {
-            const dsm::format::DecodedTile d = dsm::format::decodeTile(
-                t.bytes, t.summary, t.width, t.height,
-                {info.channels, info.hasCounts, info.maxLayers, info.codedTiles, info.levels[t.level].valueStep},
-                limits, "bench", t.originX, t.originY);
+            dsm::format::TileLayout layout{info.channels, info.hasCounts, info.maxLayers, info.codedTiles,
+                                           info.levels[t.level].valueStep};
+            layout.codec = info.codec;
+            layout.predictedDepths = info.predictedDepths;
+            const dsm::format::DecodedTile d = dsm::format::decodeTile(t.bytes, t.summary, t.width, t.height, layout,
+                                                                       limits, "bench", t.originX, t.originY);
             decodedVertices += d.records()[d.pixelCount()].vertexStart;
         }
     };
@@ -245,10 +281,11 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
         inflateSeconds = std::min(inflateSeconds, bestSeconds(1, inflateAll));
         decodeSeconds = std::min(decodeSeconds, bestSeconds(1, decodeAll));
     }
-    std::printf("  decode of %zu tiles (%llu vertices): %.2f ms; zlib inflate alone of the same bytes: %.2f ms; "
-                "decode throughput / inflate throughput = %.3f\n",
+    std::printf("  decode of %zu tiles (%llu vertices): %.2f ms; %s alone of the same bytes: %.2f ms; "
+                "decode throughput / %s throughput = %.3f\n",
                 tiles.size(), static_cast<unsigned long long>(decodedVertices), decodeSeconds * 1e3,
-                inflateSeconds * 1e3, decodeSeconds > 0.0 ? inflateSeconds / decodeSeconds : 0.0);
+                zstd ? "zstd decompression" : "zlib inflate", inflateSeconds * 1e3, zstd ? "zstd" : "inflate",
+                decodeSeconds > 0.0 ? inflateSeconds / decodeSeconds : 0.0);
 
     if (decodeOnly) return;
     const double oldDecodeSeconds = bestSeconds(rounds, [&] {
@@ -262,7 +299,7 @@ void measure(const std::string& path, int rounds, bool decodeOnly) {
     std::printf("  decode of the same pixels as 1.0 tiles: %.2f ms (coded / 1.0 decode time %.3f)\n",
                 oldDecodeSeconds * 1e3, oldDecodeSeconds > 0.0 ? decodeSeconds / oldDecodeSeconds : 0.0);
 
-    measureZstd(tiles, inflateSeconds, rounds);
+    if (!zstd) measureZstd(tiles, inflateSeconds, rounds);
     measureColdReads(path, tiles);
 }
 

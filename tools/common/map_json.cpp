@@ -50,6 +50,7 @@ std::string mapInfoJson(const MapInfo& info, const std::string& file, int indent
     j["file"] = file;
     j["file_bytes"] = info.fileBytes;
     j["format_version"] = std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor);
+    j["required_flags"] = requiredFlagNames(info);
     j["tile_coding"] = {{"coded", info.codedTiles},
                         {"codec", info.codec == dsm::TileCodec::Zstd ? "zstd" : "zlib"},
                         {"level", info.codecLevel >= 0 ? Json(info.codecLevel) : Json(nullptr)}};

@@ -18,7 +18,7 @@ namespace dsm {
 
 /// Version of the description schema. The minor version grows when fields are
 /// added, the major one when a field changes meaning.
-inline constexpr const char* kMapJsonSchemaVersion = "1.1";
+inline constexpr const char* kMapJsonSchemaVersion = "1.2";
 
 /// The description of an open map's header, levels and metadata as a JSON
 /// object (text, indented by `indent` spaces; -1 = one line). `file` is the

@@ -298,6 +298,10 @@ std::string codingText(const dsm::MapInfo& info) {
 void printSummary(std::ostream& out, const dsm::MapInfo& info) {
     field(out, "format version", std::to_string(info.versionMajor) + "." + std::to_string(info.versionMinor));
     field(out, "tile coding", codingText(info));
+    const std::vector<std::string> flags = dsm::requiredFlagNames(info);
+    std::string flagText;
+    for (const std::string& flag : flags) flagText += (flagText.empty() ? "" : ", ") + flag;
+    field(out, "required flags", flags.empty() ? "none" : flagText);
     field(out, "size", std::to_string(info.width) + " x " + std::to_string(info.height));
     field(out, "tile size", std::to_string(info.tileSize));
     field(out, "channels", channelsText(info.channels));

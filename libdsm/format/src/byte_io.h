@@ -94,6 +94,37 @@ public:
         if (end_ - at_ >= 5) return nextUnchecked();
         return nextChecked();
     }
+    /// Calls `f(i, value)` for each of the next `count` (< 2^60) values, i
+    /// from 0: the bounds checked once for the run when it cannot reach the
+    /// end (5 bytes a value at most), else value by value. The hot path of
+    /// tile decoding.
+    template <class F>
+    void forEach(std::size_t count, F&& f) {
+        if (5 * count <= remaining()) {
+#pragma GCC unroll 4
+            for (std::size_t i = 0; i < count; ++i) f(i, nextUnchecked());
+        } else {
+            for (std::size_t i = 0; i < count; ++i) f(i, next());
+        }
+    }
+    /// When the next `count` (<= 8) values are each one byte (below 128) and
+    /// 8 bytes remain: moves past them and sets `values` to those bytes, the
+    /// first lowest; otherwise false, and nothing moves.
+    bool singleBytes(std::size_t count, std::uint64_t& values) {
+        if (remaining() < 8) return false;
+        std::uint64_t word;
+        if constexpr (std::endian::native == std::endian::little) {
+            std::memcpy(&word, at_, 8);
+        } else {
+            word = 0;
+            for (int i = 0; i < 8; ++i) word |= static_cast<std::uint64_t>(at_[i]) << (8 * i);
+        }
+        const std::uint64_t mask = count >= 8 ? ~std::uint64_t(0) : (std::uint64_t(1) << (8 * count)) - 1;
+        if (word & mask & 0x8080808080808080u) return false;
+        values = word & mask;
+        at_ += count;
+        return true;
+    }
     std::uint8_t byte() {
         if (at_ == end_) {
             bad_ = true;
@@ -101,36 +132,59 @@ public:
         }
         return *at_++;
     }
+    /// The next `count` bytes, or null (and the flag set) when fewer remain.
+    const std::uint8_t* bytes(std::size_t count) {
+        if (count > remaining()) {
+            bad_ = true;
+            at_ = end_;
+            return nullptr;
+        }
+        const std::uint8_t* begin = at_;
+        at_ += count;
+        return begin;
+    }
     bool ok() const { return !bad_; }
     bool atEnd() const { return at_ == end_; }
     std::size_t remaining() const { return static_cast<std::size_t>(end_ - at_); }
 
 private:
-    // At least 5 bytes left: no bounds check per byte (the hot path of tile
-    // decoding).
+    // At least 5 bytes left: no bounds check per byte. Unrolled, each byte
+    // added with its continuation bit, which the next byte's step takes away
+    // again (exact: the value fits in 32 bits). A value beyond 32 bits sets
+    // the flag and moves on by 5 bytes, so that a run checked for 5 bytes a
+    // value stays in range.
     std::uint32_t nextUnchecked() {
-        std::uint32_t b = at_[0];
+        const std::uint8_t* const p = at_;
+        std::uint32_t v = p[0];
+        if (v < 0x80) {
+            at_ = p + 1;
+            return v;
+        }
+        std::uint32_t b = p[1];
+        v += (b << 7) - 0x80u;
         if (b < 0x80) {
-            ++at_;
-            return b;
+            at_ = p + 2;
+            return v;
         }
-        std::uint32_t v = b & 0x7F;
-        for (int i = 1; i < 4; ++i) {
-            b = at_[i];
-            v |= (b & 0x7F) << (7 * i);
-            if (b < 0x80) {
-                at_ += i + 1;
-                return v;
-            }
+        b = p[2];
+        v += (b << 14) - (0x80u << 7);
+        if (b < 0x80) {
+            at_ = p + 3;
+            return v;
         }
-        b = at_[4];
+        b = p[3];
+        v += (b << 21) - (0x80u << 14);
+        if (b < 0x80) {
+            at_ = p + 4;
+            return v;
+        }
+        b = p[4];
+        at_ = p + 5;
         if (b > 0x0F) {  // more than 32 bits
             bad_ = true;
-            at_ = end_;
             return 0;
         }
-        at_ += 5;
-        return v | (b << 28);
+        return v + (b << 28) - (0x80u << 21);
     }
     std::uint32_t nextChecked() {
         std::uint32_t v = 0;

@@ -5,10 +5,9 @@
 #include <cmath>
 #include <cstring>
 
-#include <zlib.h>
-
 #include "byte_io.h"
 #include "dsm/error.h"
+#include "dsm/names.h"
 #include "text.h"
 
 namespace dsm::format {
@@ -16,17 +15,6 @@ namespace dsm::format {
 using detail::ByteReader;
 using detail::ByteWriter;
 using detail::concat;
-
-std::uint32_t crc32(const std::uint8_t* data, std::size_t size) {
-    uLong crc = ::crc32(0L, Z_NULL, 0);
-    while (size > 0) {
-        const uInt chunk = static_cast<uInt>(std::min<std::size_t>(size, 1u << 30));
-        crc = ::crc32(crc, data, chunk);
-        data += chunk;
-        size -= chunk;
-    }
-    return static_cast<std::uint32_t>(crc);
-}
 
 std::vector<std::uint8_t> encodeHeader(const Header& h) {
     std::vector<std::uint8_t> out;
@@ -254,6 +242,12 @@ TileSummary decodeTileEntry(const std::uint8_t* data) {
     return t;
 }
 
+std::uint32_t requiredFlagsOf(const MapInfo& info) {
+    return (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u) |
+           (info.codedTiles ? kRequiredCodedTiles : 0u) |
+           (info.codedTiles && info.predictedDepths ? kRequiredPredictedDepths : 0u);
+}
+
 Header headerFromInfo(const MapInfo& info, std::uint16_t minor) {
     Header h;
     h.versionMinor = minor;
@@ -262,9 +256,7 @@ Header headerFromInfo(const MapInfo& info, std::uint16_t minor) {
     h.tileSize = info.tileSize;
     h.channels = static_cast<std::uint8_t>(info.channels);
     h.maxLayers = static_cast<std::uint8_t>(info.maxLayers);
-    h.requiredFlags = (info.hasCounts ? kRequiredHasCounts : 0u) | (info.maxLayers > 1 ? kRequiredHasLayers : 0u) |
-                      (info.codedTiles ? kRequiredCodedTiles : 0u) |
-                      (info.codedTiles && info.predictedDepths ? kRequiredPredictedDepths : 0u);
+    h.requiredFlags = requiredFlagsOf(info);
     h.codec = static_cast<std::uint8_t>(info.codec);
     h.codecLevel = static_cast<std::uint8_t>(std::max(info.codecLevel, 0));
     h.areaLightRadius = info.areaLightRadius;
@@ -304,3 +296,18 @@ void infoFromHeader(const Header& h, MapInfo& info) {
 }
 
 }  // namespace dsm::format
+
+DSM_NAMESPACE_BEGIN
+
+// Declared in dsm/names.h; here beside the flags' bits (a reader refuses
+// unknown flags and HAS_LAYERS that disagrees with maxLayers, so the flags
+// follow from MapInfo).
+std::vector<std::string> requiredFlagNames(const MapInfo& info) {
+    const std::uint32_t flags = format::requiredFlagsOf(info);
+    std::vector<std::string> names;
+    for (const format::NamedFlag& f : format::kRequiredFlagNames)
+        if (flags & f.bit) names.emplace_back(f.name);
+    return names;
+}
+
+DSM_NAMESPACE_END

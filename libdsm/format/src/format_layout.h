@@ -35,6 +35,17 @@ inline constexpr std::uint32_t kRequiredCodedTiles = 1u << 2;  // 1.1
 inline constexpr std::uint32_t kRequiredPredictedDepths = 1u << 3;  // 1.1, with coded tiles
 inline constexpr std::uint32_t kKnownRequiredFlags =
     kRequiredHasCounts | kRequiredHasLayers | kRequiredCodedTiles | kRequiredPredictedDepths;
+/// Each required flag and its name in the spec, lowest bit first.
+struct NamedFlag {
+    std::uint32_t bit;
+    const char* name;
+};
+inline constexpr NamedFlag kRequiredFlagNames[] = {{kRequiredHasCounts, "HAS_COUNTS"},
+                                                   {kRequiredHasLayers, "HAS_LAYERS"},
+                                                   {kRequiredCodedTiles, "CODED_TILES"},
+                                                   {kRequiredPredictedDepths, "PREDICTED_DEPTHS"}};
+/// The required flags of a file that `info` describes.
+std::uint32_t requiredFlagsOf(const MapInfo& info);
 
 // Tile codecs (header field `codec`, 1.1) and their level ranges.
 inline constexpr std::uint8_t kCodecZlib = 0;
