@@ -104,6 +104,8 @@ struct Receivers {
     std::vector<Vec3> points;
     std::vector<Vec3> normals;  // of the surface each point lies on (facing the camera)
     std::vector<char> valid;
+    std::vector<std::uint32_t> objects;  // the scene object each point lies on
+    std::vector<std::string> objectNames;
 };
 
 /// A camera that looks at the point the light's axis meets, from the light's
@@ -130,6 +132,9 @@ Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tra
     r.height = config.imageHeight;
     r.points.resize(std::size_t(r.width) * r.height);
     r.normals.resize(r.points.size());
+    r.objects.assign(r.points.size(), 0);
+    for (std::size_t k = 0; k < scene.objects.size(); ++k)
+        r.objectNames.push_back(scene.objects[k].name.empty() ? "object " + std::to_string(k) : scene.objects[k].name);
     r.valid.assign(r.points.size(), 0);
     const double aspect = double(r.width) / r.height;
     for (std::uint32_t y = 0; y < r.height; ++y)
@@ -144,6 +149,7 @@ Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tra
             r.points[std::size_t(y) * r.width + x] = add(h->position, mul(h->normal, 1e-4 * distance));
             r.normals[std::size_t(y) * r.width + x] = h->normal;
             r.valid[std::size_t(y) * r.width + x] = 1;
+            r.objects[std::size_t(y) * r.width + x] = h->object;
         }
     return r;
 }
@@ -454,7 +460,34 @@ Json biasStudy(const Config& config, const std::shared_ptr<const dsm::DeepShadow
         }
     }
     Json out{{"constants", constants}, {"best_bias", bestBias}, {"best_error", best}, {"lit_receivers", lit}};
+    // Where the automatic bias's error and the best constant's come from:
+    // each object's receivers' share of the mean error.
+    auto byObject = [&](const Frame& f) {
+        std::vector<double> share(receivers.objectNames.size(), 0.0);
+        std::vector<std::size_t> dark(receivers.objectNames.size(), 0);
+        std::size_t n = 0;
+        for (std::size_t i = 0; i < f.v.size(); ++i)
+            if (f.v[i] >= 0.0f) {
+                share[receivers.objects[i]] += std::abs(double(f.v[i]) - ref.v[i]);
+                dark[receivers.objects[i]] += ref.v[i] >= 1.0f && f.v[i] < 0.9f;
+                ++n;
+            }
+        Json objects;
+        for (std::size_t k = 0; k < share.size(); ++k)
+            objects[receivers.objectNames[k]] = {{"error_share", share[k] / double(std::max<std::size_t>(1, n))},
+                                                 {"lit_but_dark", dark[k]}};
+        return objects;
+    };
+    {
+        dsm::SoftShadowOptions atBest = o;
+        atBest.bias = bestBias;
+        out["best_by_object"] =
+            byObject(render(Method::Mtsm, receivers, tracer, reference, light, atBest, config.threads));
+    }
     o.bias.reset();
+    out["auto_by_object"] = byObject(render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads));
+    std::printf("  %s bias by object (error share, lit receivers below 0.9): best constant %s | auto %s\n",
+                name.c_str(), out["best_by_object"].dump().c_str(), out["auto_by_object"].dump().c_str());
     for (const bool normals : {false, true}) {
         const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads, normals);
         const Difference d = difference(mtsm, ref);
@@ -649,7 +682,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
         out["error_budget"] = errorBudget(config, scene, receivers, reference, radii[1], radii[2], base, build, name);
         return out;
     }
-    if (!config.shadowsOnly) out["ray_speed"] = raySpeed(map, receivers, reference, radii[1], planeDepth, base, name);
+    if (!config.shadowsOnly && !config.biasStudyOnly) out["ray_speed"] = raySpeed(map, receivers, reference, radii[1], planeDepth, base, name);
     if (config.speedOnly) {
         if (scaling) out["scaling"] = hierarchyScaling(config, scene, receivers, radii[1], base, name);
         return out;
