@@ -19,8 +19,10 @@
 // candidate defaults for area-light maps; --budget-rows 'KNOB: VALUE;...'
 // runs only the rows named so ("default", "filter: box 1", ...).
 // --shadows-only runs only the table of lights and sample counts (--samples
-// N,M: its light sample counts); --area-defaults builds the map with
-// dsm-build's defaults for an area-light scene instead of the plain ones.
+// N,M: its light sample counts). The scene's map is built as dsm-build builds
+// a scene with an area light (box filter of width 1, 2 layers, 0.125 /
+// sqrt(spp)); --plain-maps builds it with the plain deep shadow map's filter
+// and tolerance (Gaussian of width 2, 0.25 / sqrt(spp)) and 4 layers.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -61,7 +63,7 @@ struct Config {
     bool speedOnly = false;      // --speed: only the cost of a ray and of the first query
     bool errorBudgetOnly = false;  // --error-budget: only the error's sources, one knob at a time
     bool shadowsOnly = false;      // --shadows-only: only the table of lights and sample counts
-    bool areaDefaults = false;     // --area-defaults: the map as dsm-build builds an area-light scene
+    bool areaDefaults = true;      // the map as dsm-build builds an area-light scene; --plain-maps: the plain defaults
     std::vector<std::string> scenes;
     std::vector<std::string> budgetRows;  // --budget-rows: the error budget's rows to run ("knob: value"), empty = all
     std::uint32_t mapResolution = 256, mapSpp = 16;
@@ -811,13 +813,13 @@ int main(int argc, char** argv) {
         else if (a == "--scenes" && hasValue) scenes = argv[++i];
         else if (a == "--budget-rows" && hasValue) budgetRows = argv[++i];
         else if (a == "--shadows-only") config.shadowsOnly = true;
-        else if (a == "--area-defaults") config.areaDefaults = true;
+        else if (a == "--plain-maps") config.areaDefaults = false;
         else if (a == "--samples" && hasValue) samples = argv[++i];
         else if (a == "--threads" && hasValue) config.threads = static_cast<unsigned>(std::stoul(argv[++i]));
         else {
             std::fprintf(stderr, "usage: bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] "
                                  "[--speed] [--error-budget [--budget-rows 'KNOB: VALUE;...']] [--shadows-only] "
-                                 "[--area-defaults] [--samples N,M] [--scenes A,B] [--threads T]\n");
+                                 "[--plain-maps] [--samples N,M] [--scenes A,B] [--threads T]\n");
             return 2;
         }
     }
