@@ -39,7 +39,9 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
     app.add_option("-s,--spp", options.samplesPerPixel, "Samples per pixel (stratified, jittered), 1..65536")
         ->check(integerIn(1, 65536))
         ->capture_default_str();
-    app.add_option("-e,--tolerance", text.tolerance, "Compression tolerance: auto (0.25/sqrt(spp)) or a value in [0, 1]")
+    app.add_option("-e,--tolerance", text.tolerance,
+                   "Compression tolerance: auto (0.25/sqrt(spp), 0.125/sqrt(spp) for a scene with an area light) or "
+                   "a value in [0, 1]")
         ->capture_default_str();
     app.add_option("-f,--filter", text.filter,
                    "Pixel filter: box, triangle or gaussian; auto: gaussian, box for a scene with an area light")

@@ -45,8 +45,8 @@ struct BuildOptions {
     std::optional<double> tolerance;
     /// Pixel filter; unset = Gaussian, or for a scene with an area light box.
     std::optional<PixelFilter> filter;
-    /// Filter width in pixels (the footprint's diameter); unset = 2, or for a
-    /// scene with an area light 1.
+    /// Filter width in pixels (the footprint's diameter); unset = 2, or 1 for
+    /// the box filter of a scene with an area light.
     std::optional<double> filterWidth;
     /// As WriterOptions::mipLevels: 1 = no mip-maps, N levels; unset = full pyramid.
     std::optional<unsigned> mipLevels;
