@@ -359,10 +359,11 @@ Json raySpeed(const std::shared_ptr<const dsm::DeepShadowMap>& map, const Receiv
                 {"pixels_per_ray", double(context.stats().pixelsVisited) / std::max(1.0, mapRays)}};
 }
 
-/// The bench's maps: the plain deep shadow map's filter (Gaussian, width 2)
-/// and automatic tolerance 0.25 / sqrt(spp), with the configured MTSM layers,
-/// all set here so that the figures do not move with dsm-build's defaults for
-/// area-light scenes (the error budget measures those).
+/// A map with the plain deep shadow map's filter (Gaussian, width 2) and
+/// automatic tolerance 0.25 / sqrt(spp) and the configured MTSM layers, all
+/// set here: the error budget's baseline, the resolution scaling's maps and,
+/// with --plain-maps, the scene's map (otherwise built with dsm-build's
+/// defaults for an area-light scene).
 dsm::BuildOptions benchBuild(const Config& config, std::uint32_t size, std::uint32_t spp) {
     dsm::BuildOptions build;
     build.width = build.height = size;
