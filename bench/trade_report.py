@@ -255,7 +255,8 @@ class Report:
                  "scene.", "")
         for sc in soft["scenes"]:
             m = sc["map"]
-            self.add(f"### {sc['scene']} (map {m['resolution']}², {m['spp']} spp, {m['layers']} layers, "
+            filt = f"{m['filter']} {m['filter_width']:g}, tolerance {m['tolerance']:.3g}, " if "filter" in m else ""
+            self.add(f"### {sc['scene']} (map {m['resolution']}², {m['spp']} spp, {filt}{m['layers']} layers, "
                      f"{kib(m['file_bytes'])} KiB; image {sc['image']['width']}×{sc['image']['height']}; "
                      f"bias {bias_text(sc['bias'])}, z threshold {sc['z_threshold']:.3g})", "")
             body = []

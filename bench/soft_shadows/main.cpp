@@ -15,7 +15,14 @@
 // --bias-study runs only the automatic bias against constant biases; --speed
 // only the cost of a ray against Embree's and the cost of the first query;
 // --error-budget only the MTSM error's sources (build filter, tolerance,
-// resolution, samples per pixel, layers, light samples), one at a time.
+// resolution, samples per pixel, layers, light samples), one at a time, and
+// candidate defaults for area-light maps; --budget-rows 'KNOB: VALUE;...'
+// runs only the rows named so ("default", "filter: box 1", ...).
+// --shadows-only runs only the table of lights and sample counts (--samples
+// N,M: its light sample counts). The scene's map is built as dsm-build builds
+// a scene with an area light (box filter of width 1, 2 layers, 0.125 /
+// sqrt(spp)); --plain-maps builds it with the plain deep shadow map's filter
+// and tolerance (Gaussian of width 2, 0.25 / sqrt(spp)) and 4 layers.
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -32,8 +39,10 @@
 #include <nlohmann/json.hpp>
 
 #include <dsm/area_light.h>
+#include <dsm/compressor.h>
 #include "image_io.h"
 #include <dsm/map_images.h>
+#include <dsm/names.h>
 #include <dsm/reference_tracer.h>
 #include <dsm/sampler.h>
 #include <dsm/scene.h>
@@ -53,7 +62,10 @@ struct Config {
     bool biasStudyOnly = false;  // --bias-study: only the automatic bias against constants
     bool speedOnly = false;      // --speed: only the cost of a ray and of the first query
     bool errorBudgetOnly = false;  // --error-budget: only the error's sources, one knob at a time
+    bool shadowsOnly = false;      // --shadows-only: only the table of lights and sample counts
+    bool areaDefaults = true;      // the map as dsm-build builds an area-light scene; --plain-maps: the plain defaults
     std::vector<std::string> scenes;
+    std::vector<std::string> budgetRows;  // --budget-rows: the error budget's rows to run ("knob: value"), empty = all
     std::uint32_t mapResolution = 256, mapSpp = 16;
     int mapLayers = 4;
     std::uint32_t imageWidth = 160, imageHeight = 120;
@@ -94,6 +106,8 @@ struct Receivers {
     std::vector<Vec3> points;
     std::vector<Vec3> normals;  // of the surface each point lies on (facing the camera)
     std::vector<char> valid;
+    std::vector<std::uint32_t> objects;  // the scene object each point lies on
+    std::vector<std::string> objectNames;
 };
 
 /// A camera that looks at the point the light's axis meets, from the light's
@@ -120,6 +134,9 @@ Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tra
     r.height = config.imageHeight;
     r.points.resize(std::size_t(r.width) * r.height);
     r.normals.resize(r.points.size());
+    r.objects.assign(r.points.size(), 0);
+    for (std::size_t k = 0; k < scene.objects.size(); ++k)
+        r.objectNames.push_back(scene.objects[k].name.empty() ? "object " + std::to_string(k) : scene.objects[k].name);
     r.valid.assign(r.points.size(), 0);
     const double aspect = double(r.width) / r.height;
     for (std::uint32_t y = 0; y < r.height; ++y)
@@ -134,6 +151,7 @@ Receivers viewReceivers(const dsm::Scene& scene, const dsm::ReferenceTracer& tra
             r.points[std::size_t(y) * r.width + x] = add(h->position, mul(h->normal, 1e-4 * distance));
             r.normals[std::size_t(y) * r.width + x] = h->normal;
             r.valid[std::size_t(y) * r.width + x] = 1;
+            r.objects[std::size_t(y) * r.width + x] = h->object;
         }
     return r;
 }
@@ -209,6 +227,27 @@ Difference difference(const Frame& a, const Frame& b) {
 }
 
 Json toJson(const Difference& d) { return Json{{"mean", d.mean}, {"stddev", d.stddev}, {"max", d.max}}; }
+
+/// Where a method's mean error comes from: the sums of |method - reference|
+/// over the receivers the reference sees lit (1), in the umbra (0) and in
+/// the penumbra (between), each divided by all the receivers, so the three
+/// add up to the mean error; and how many receivers each class holds.
+Json errorByClass(const Frame& method, const Frame& reference) {
+    double sum[3] = {0.0, 0.0, 0.0};
+    std::size_t count[3] = {0, 0, 0}, n = 0;
+    for (std::size_t i = 0; i < method.v.size(); ++i) {
+        if (method.v[i] < 0.0f) continue;
+        const int c = reference.v[i] >= 1.0f ? 0 : reference.v[i] <= 0.0f ? 1 : 2;
+        sum[c] += std::abs(double(method.v[i]) - reference.v[i]);
+        ++count[c];
+        ++n;
+    }
+    Json out;
+    const char* names[] = {"lit", "umbra", "penumbra"};
+    for (int c = 0; c < 3; ++c)
+        out[names[c]] = {{"receivers", count[c]}, {"error_share", n ? sum[c] / double(n) : 0.0}};
+    return out;
+}
 
 /// Copies a frame into a cell of a contact sheet: visibility as grey
 /// (background dark blue), or with `reference` the signed difference x4 as
@@ -320,6 +359,23 @@ Json raySpeed(const std::shared_ptr<const dsm::DeepShadowMap>& map, const Receiv
                 {"pixels_per_ray", double(context.stats().pixelsVisited) / std::max(1.0, mapRays)}};
 }
 
+/// A map with the plain deep shadow map's filter (Gaussian, width 2) and
+/// automatic tolerance 0.25 / sqrt(spp) and the configured MTSM layers, all
+/// set here: the error budget's baseline, the resolution scaling's maps and,
+/// with --plain-maps, the scene's map (otherwise built with dsm-build's
+/// defaults for an area-light scene).
+dsm::BuildOptions benchBuild(const Config& config, std::uint32_t size, std::uint32_t spp) {
+    dsm::BuildOptions build;
+    build.width = build.height = size;
+    build.samplesPerPixel = spp;
+    build.tolerance = dsm::autoTolerance(spp);
+    build.filter = dsm::PixelFilter::Gaussian;
+    build.filterWidth = 2.0;
+    build.mtsmLayers = config.mapLayers;
+    build.threads = config.threads;
+    return build;
+}
+
 /// Cost of a ray through the map against the map's resolution (Xie §4.3):
 /// the same receivers and light at 128² .. 1024², every ray walked pixel by
 /// pixel or through the min/max depth hierarchy (classification off, so
@@ -334,11 +390,7 @@ Json hierarchyScaling(const Config& config, const dsm::Scene& sceneIn, const Rec
         if (receivers.valid[i]) points.push_back(receivers.points[i]);
     Json rows = Json::array();
     for (const std::uint32_t size : sizes) {
-        dsm::BuildOptions build;
-        build.width = build.height = size;
-        build.samplesPerPixel = 4;
-        build.mtsmLayers = config.mapLayers;
-        build.threads = config.threads;
+        const dsm::BuildOptions build = benchBuild(config, size, 4);
         const auto path = config.workDir / (name + "-scaling.dsm");
         dsm::buildMap(scene, build, path.string());
         Json row{{"resolution", size}, {"receivers", points.size()}, {"first_query", firstQuery(path, points, radius, scene, base)}};
@@ -411,7 +463,34 @@ Json biasStudy(const Config& config, const std::shared_ptr<const dsm::DeepShadow
         }
     }
     Json out{{"constants", constants}, {"best_bias", bestBias}, {"best_error", best}, {"lit_receivers", lit}};
+    // Where the automatic bias's error and the best constant's come from:
+    // each object's receivers' share of the mean error.
+    auto byObject = [&](const Frame& f) {
+        std::vector<double> share(receivers.objectNames.size(), 0.0);
+        std::vector<std::size_t> dark(receivers.objectNames.size(), 0);
+        std::size_t n = 0;
+        for (std::size_t i = 0; i < f.v.size(); ++i)
+            if (f.v[i] >= 0.0f) {
+                share[receivers.objects[i]] += std::abs(double(f.v[i]) - ref.v[i]);
+                dark[receivers.objects[i]] += ref.v[i] >= 1.0f && f.v[i] < 0.9f;
+                ++n;
+            }
+        Json objects;
+        for (std::size_t k = 0; k < share.size(); ++k)
+            objects[receivers.objectNames[k]] = {{"error_share", share[k] / double(std::max<std::size_t>(1, n))},
+                                                 {"lit_but_dark", dark[k]}};
+        return objects;
+    };
+    {
+        dsm::SoftShadowOptions atBest = o;
+        atBest.bias = bestBias;
+        out["best_by_object"] =
+            byObject(render(Method::Mtsm, receivers, tracer, reference, light, atBest, config.threads));
+    }
     o.bias.reset();
+    out["auto_by_object"] = byObject(render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads));
+    std::printf("  %s bias by object (error share, lit receivers below 0.9): best constant %s | auto %s\n",
+                name.c_str(), out["best_by_object"].dump().c_str(), out["auto_by_object"].dump().c_str());
     for (const bool normals : {false, true}) {
         const Frame mtsm = render(Method::Mtsm, receivers, tracer, reference, light, o, config.threads, normals);
         const Difference d = difference(mtsm, ref);
@@ -470,7 +549,54 @@ Json errorBudget(const Config& config, const dsm::Scene& sceneIn, const Receiver
              b.width = b.height = 1024u;
          }),
          64, std::nullopt},
+        {"dsm-build defaults", "area light", [&] {
+             dsm::BuildOptions b;  // what buildMap resolves for a scene with an area light
+             b.width = defaults.width;
+             b.height = defaults.height;
+             b.samplesPerPixel = defaults.samplesPerPixel;
+             b.threads = defaults.threads;
+             return b;
+         }(),
+         64, std::nullopt},
+        // Candidates for the defaults of a map built for an area light.
+        {"built layers", "1, no counts", with([](auto& b) { b.mtsmLayers = 1; }), 64, std::nullopt},
+        {"built layers", "2", with([](auto& b) { b.mtsmLayers = 2; }), 64, std::nullopt},
+        {"box 1, 2 layers", "", with([&](auto& b) {
+             boxOne(b);
+             b.mtsmLayers = 2;
+         }),
+         64, std::nullopt},
+        {"box 1, 2 layers", "tolerance 0.031", with([&](auto& b) {
+             boxOne(b);
+             b.mtsmLayers = 2;
+             b.tolerance = 0.03125;
+         }),
+         64, std::nullopt},
+        {"box 1, 1 layer", "tolerance 0.031", with([&](auto& b) {
+             boxOne(b);
+             b.mtsmLayers = 1;
+             b.tolerance = 0.03125;
+         }),
+         64, std::nullopt},
+        {"box 1, 1 layer, counts", "tolerance 0.031", with([&](auto& b) {
+             boxOne(b);
+             b.mtsmLayers = 1;
+             b.counts = true;
+             b.tolerance = 0.03125;
+         }),
+         64, std::nullopt},
+        {"box 1, 2 layers", "tolerance 0.02", with([&](auto& b) {
+             boxOne(b);
+             b.mtsmLayers = 2;
+             b.tolerance = 0.02;
+         }),
+         64, std::nullopt},
     };
+    if (!config.budgetRows.empty())
+        std::erase_if(rows, [&](const Row& row) {
+            const std::string id = row.value.empty() ? row.knob : row.knob + ": " + row.value;
+            return std::find(config.budgetRows.begin(), config.budgetRows.end(), id) == config.budgetRows.end();
+        });
     std::map<int, Frame> references;
     Json out = Json::array();
     for (const Row& row : rows) {
@@ -524,11 +650,14 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
     // One map serves every radius: built for the largest light, so its
     // push-back lets it see whatever any point of that light sees.
     scene.light.areaLightRadius = radii[2];
-    dsm::BuildOptions build;
-    build.width = build.height = config.mapResolution;
-    build.samplesPerPixel = config.mapSpp;
-    build.mtsmLayers = config.mapLayers;
-    build.threads = config.threads;
+    dsm::BuildOptions build = benchBuild(config, config.mapResolution, config.mapSpp);
+    if (config.areaDefaults) {
+        // Only what the bench fixes; the rest as dsm-build gives a scene with an area light.
+        build.tolerance.reset();
+        build.filter.reset();
+        build.filterWidth.reset();
+        build.mtsmLayers.reset();
+    }
     const auto mapPath = config.workDir / (name + "-soft.dsm");
     const dsm::BuildStats built = dsm::buildMap(scene, build, mapPath.string());
     const auto map = dsm::DeepShadowMap::open(mapPath.string());
@@ -539,7 +668,10 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
     out["scale"] = scale;
     out["map"] = {{"resolution", config.mapResolution},
                   {"spp", config.mapSpp},
-                  {"layers", config.mapLayers},
+                  {"layers", map->info().maxLayers},
+                  {"filter", dsm::filterName(map->info().filter)},
+                  {"filter_width", map->info().filterWidth},
+                  {"tolerance", built.tolerance},
                   {"file_bytes", map->info().fileBytes},
                   {"build_seconds", built.wallSeconds}};
     out["image"] = {{"width", receivers.width}, {"height", receivers.height}};
@@ -553,7 +685,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
         out["error_budget"] = errorBudget(config, scene, receivers, reference, radii[1], radii[2], base, build, name);
         return out;
     }
-    out["ray_speed"] = raySpeed(map, receivers, reference, radii[1], planeDepth, base, name);
+    if (!config.shadowsOnly && !config.biasStudyOnly) out["ray_speed"] = raySpeed(map, receivers, reference, radii[1], planeDepth, base, name);
     if (config.speedOnly) {
         if (scaling) out["scaling"] = hierarchyScaling(config, scene, receivers, radii[1], base, name);
         return out;
@@ -582,7 +714,17 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
                             {"mtsm_seconds", mtsm.seconds},
                             {"pcf_seconds", pcf.seconds},
                             {"mtsm_error", toJson(dm)},
-                            {"pcf_error", toJson(dp)}});
+                            {"pcf_error", toJson(dp)},
+                            {"mtsm_error_by_class", errorByClass(mtsm, ref)},
+                            {"pcf_error_by_class", errorByClass(pcf, ref)}});
+            const Json em = errorByClass(mtsm, ref), ep = errorByClass(pcf, ref);
+            std::printf("  %s %-6s N=%3d  error shares lit/umbra/penumbra (%zu/%zu/%zu receivers): MTSM "
+                        "%.4f/%.4f/%.4f | PCF %.4f/%.4f/%.4f\n",
+                        name.c_str(), radiusNames[ri], n, em["lit"]["receivers"].get<std::size_t>(),
+                        em["umbra"]["receivers"].get<std::size_t>(), em["penumbra"]["receivers"].get<std::size_t>(),
+                        em["lit"]["error_share"].get<double>(), em["umbra"]["error_share"].get<double>(),
+                        em["penumbra"]["error_share"].get<double>(), ep["lit"]["error_share"].get<double>(),
+                        ep["umbra"]["error_share"].get<double>(), ep["penumbra"]["error_share"].get<double>());
             std::printf("  %s %-6s N=%3d  reference %6.2f s | MTSM %6.2f s err %.4f±%.4f | PCF %6.2f s err %.4f±%.4f\n",
                         name.c_str(), radiusNames[ri], n, ref.seconds, mtsm.seconds, dm.mean, dm.stddev, pcf.seconds,
                         dp.mean, dp.stddev);
@@ -597,6 +739,7 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
         }
     }
     out["rows"] = std::move(rows);
+    if (config.shadowsOnly) return out;
     const std::string sheetName = "soft-" + name + ".png";
     dsm::writeImage((config.images / sheetName).string(), sheet);
     out["sheet"] = sheetName;
@@ -644,10 +787,10 @@ Json runScene(const Config& config, const std::string& file, bool sweepKnobs, bo
     return out;
 }
 
-std::vector<std::string> splitList(const std::string& text) {
+std::vector<std::string> splitList(const std::string& text, char separator = ',') {
     std::vector<std::string> out;
     std::stringstream in(text);
-    for (std::string item; std::getline(in, item, ',');)
+    for (std::string item; std::getline(in, item, separator);)
         if (!item.empty()) out.push_back(item);
     return out;
 }
@@ -656,7 +799,7 @@ std::vector<std::string> splitList(const std::string& text) {
 
 int main(int argc, char** argv) {
     Config config;
-    std::string outPath, scenes = std::string(DSM_SOFT_EXAMPLES_DIR) + "/hairball.json," + DSM_SOFT_EXAMPLES_DIR +
+    std::string outPath, budgetRows, samples, scenes = std::string(DSM_SOFT_EXAMPLES_DIR) + "/hairball.json," + DSM_SOFT_EXAMPLES_DIR +
                                   "/cloud-and-pipes.json," + DSM_SOFT_EXAMPLES_DIR + "/leaves.json," +
                                   DSM_SOFT_EXAMPLES_DIR + "/motion.json";
     for (int i = 1; i < argc; ++i) {
@@ -669,10 +812,15 @@ int main(int argc, char** argv) {
         else if (a == "--out" && hasValue) outPath = argv[++i];
         else if (a == "--images" && hasValue) config.images = argv[++i];
         else if (a == "--scenes" && hasValue) scenes = argv[++i];
+        else if (a == "--budget-rows" && hasValue) budgetRows = argv[++i];
+        else if (a == "--shadows-only") config.shadowsOnly = true;
+        else if (a == "--plain-maps") config.areaDefaults = false;
+        else if (a == "--samples" && hasValue) samples = argv[++i];
         else if (a == "--threads" && hasValue) config.threads = static_cast<unsigned>(std::stoul(argv[++i]));
         else {
             std::fprintf(stderr, "usage: bench_soft_shadows --out FILE.json --images DIR [--smoke] [--bias-study] "
-                                 "[--speed] [--error-budget] [--scenes A,B] [--threads T]\n");
+                                 "[--speed] [--error-budget [--budget-rows 'KNOB: VALUE;...']] [--shadows-only] "
+                                 "[--plain-maps] [--samples N,M] [--scenes A,B] [--threads T]\n");
             return 2;
         }
     }
@@ -689,6 +837,11 @@ int main(int argc, char** argv) {
     }
     if (config.threads == 0) config.threads = std::max(1u, std::thread::hardware_concurrency());
     config.scenes = splitList(scenes);
+    config.budgetRows = splitList(budgetRows, ';');
+    if (!samples.empty()) {
+        config.samples.clear();
+        for (const std::string& n : splitList(samples)) config.samples.push_back(std::stoi(n));
+    }
     config.workDir = std::filesystem::temp_directory_path() / ("dsm-soft-" + std::to_string(::getpid()));
     std::filesystem::create_directories(config.workDir);
     std::filesystem::create_directories(config.images);

@@ -122,8 +122,8 @@ class Map:
         (N, 3) array, like ``dsm-lookup --area-light``.
 
         light: "disk:R" (radius) or "rect:W,H" (full sizes), centred on the
-        map's light where its build put it (the map should be built with the
-        light's area_radius and mtsm_layers > 1). method: "mtsm" traces
+        map's light where its build put it (the map should be built from a
+        scene whose light has an area_radius: 2 layers by default). method: "mtsm" traces
         `samples` rays per point through the map as a multilayer transparent
         shadow map (layers K: 0 = all; z_threshold and bias in light depth
         units); "pcf" is the classic filtered-lookup baseline. bias: "auto"
@@ -159,7 +159,10 @@ def build(scene: Union[str, os.PathLike, Mapping[str, Any]], out_path, **options
     options: the options of dsm-build with underscores: resolution (N or
     (W, H)), spp, tolerance ("auto" or a number), filter, filter_width,
     mip_levels ("auto" or N), tile_size, mtsm_layers, counts, region
-    ((x0, y0, x1, y1)), threads, seed, zlib_level.
+    ((x0, y0, x1, y1)), threads, seed, zlib_level. tolerance, filter,
+    filter_width and mtsm_layers left out (or "auto") take the scene's
+    defaults: those of a map for soft shadows when the light has an
+    area_radius (dsm-build's documentation).
     Returns the build statistics as a dict.
     """
     if isinstance(scene, Mapping):

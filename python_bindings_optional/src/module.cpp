@@ -348,14 +348,20 @@ dsm::BuildOptions buildOptions(const py::dict& kwargs) {
         else if (key == "tolerance") {
             if (!py::isinstance<py::str>(value)) o.tolerance = value.cast<double>();  // a string: "auto"
         }
-        else if (key == "filter") o.filter = parseFilter(value.cast<std::string>());
-        else if (key == "filter_width") o.filterWidth = value.cast<double>();
+        else if (key == "filter") {
+            if (value.cast<std::string>() != "auto") o.filter = parseFilter(value.cast<std::string>());
+        }
+        else if (key == "filter_width") {
+            if (!py::isinstance<py::str>(value)) o.filterWidth = value.cast<double>();  // a string: "auto"
+        }
         else if (key == "mip_levels") {
             // "auto" or 0: the full pyramid.
             if (!py::isinstance<py::str>(value) && value.cast<unsigned>() != 0) o.mipLevels = value.cast<unsigned>();
         }
         else if (key == "tile_size") o.tileSize = value.cast<std::uint32_t>();
-        else if (key == "mtsm_layers") o.mtsmLayers = value.cast<int>();
+        else if (key == "mtsm_layers") {
+            if (!py::isinstance<py::str>(value)) o.mtsmLayers = value.cast<int>();  // a string: "auto"
+        }
         else if (key == "counts") o.counts = value.cast<bool>();
         else if (key == "region") o.region = value.cast<std::array<std::uint32_t, 4>>();
         else if (key == "threads") {

@@ -74,3 +74,22 @@ def test_automatic_bias_by_default_and_with_normals(square_map):
         square_map.soft_shadow(pts, light="disk:1", normals=up[:2])
     with pytest.raises(ValueError):
         square_map.soft_shadow(pts, light="disk:1", bias="never")
+
+
+def built(path, **options):
+    dsm.build(SQUARE_SCENE, path, resolution=16, spp=4, threads=2, **options)
+    return dsm.open(path)
+
+
+def test_a_scene_with_an_area_light_gets_the_soft_shadow_build_defaults(tmp_path):
+    defaults = built(tmp_path / "defaults.dsm")
+    settings = defaults.metadata["settings"]
+    assert (defaults.max_layers, defaults.has_counts) == (2, True)
+    assert (settings["filter"], settings["filter_width"], settings["tolerance"]) == ("box", 1.0, 0.0625)
+    # "auto" is the same as leaving an option out; a value given is kept.
+    auto = built(tmp_path / "auto.dsm", filter="auto", filter_width="auto", mtsm_layers="auto", tolerance="auto")
+    assert auto.metadata["settings"] == settings
+    given = built(tmp_path / "given.dsm", filter="gaussian", mtsm_layers=1, tolerance=0.25)
+    assert (given.max_layers, given.has_counts) == (1, False)
+    assert (given.metadata["settings"]["filter"], given.metadata["settings"]["filter_width"]) == ("gaussian", 2.0)
+    assert given.metadata["settings"]["tolerance"] == 0.25

@@ -4,7 +4,7 @@
 #         -DEXAMPLES_DIR=<examples/> -DWORK_DIR=<fresh dir> -DVERSION=<project version>
 #         -P check_dsm_build.cmake
 #
-# Checks: build deterministic stdin help version bad_value missing json_error build_error.
+# Checks: build area_light_defaults deterministic stdin help version bad_value missing json_error build_error.
 # Builds use examples/leaves.json (an RGB map) at 64 x 64 with 4 samples per pixel.
 cmake_minimum_required(VERSION 3.25)
 
@@ -98,6 +98,30 @@ if(CHECK STREQUAL "build")
   if(NOT vertices EQUAL levelVertices)
     fail("--stats-json vertices ${vertices} but level 0 holds ${levelVertices}")
   endif()
+
+elseif(CHECK STREQUAL "area_light_defaults")
+  # A scene with an area light gets the soft-shadow defaults (2 layers with
+  # counts, a box of width 1, 0.125 / sqrt(spp), 0.125 at 1 sample per pixel); options given are kept.
+  set(area "${EXAMPLES_DIR}/area-light.json")
+  foreach(case IN ITEMS "auto;2;ON;box;1.0;0.125" "given;1;OFF;gaussian;2.0;0.25")  # CMake reads JSON booleans as ON/OFF
+    list(POP_FRONT case how layers counts filter width tolerance)
+    if(how STREQUAL "auto")
+      run("${area}" -o "${MAP}" -r 8 --spp 1 -q)
+    else()
+      run("${area}" -o "${MAP}" -r 8 --spp 1 -q --mtsm-layers 1 --filter gaussian --tolerance 0.25)
+    endif()
+    expect_rc(0)
+    execute_process(COMMAND ${DSM_INFO} --json "${MAP}" RESULT_VARIABLE rc OUTPUT_VARIABLE info)
+    if(NOT rc EQUAL 0)
+      message(FATAL_ERROR "dsm-info --json failed")
+    endif()
+    json_expect("${info}" ${layers} max_layers)
+    json_expect("${info}" ${counts} has_counts)
+    json_expect("${info}" ${filter} filter type)
+    json_expect("${info}" ${width} filter width)
+    json_expect("${info}" ${tolerance} levels 0 tolerance)
+    json_expect("${info}" ${layers} metadata settings mtsm_layers)
+  endforeach()
 
 elseif(CHECK STREQUAL "level_tolerance_factor")
   # Each coarser level's tolerance is the previous one's times the factor, and

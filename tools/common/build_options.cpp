@@ -39,13 +39,17 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
     app.add_option("-s,--spp", options.samplesPerPixel, "Samples per pixel (stratified, jittered), 1..65536")
         ->check(integerIn(1, 65536))
         ->capture_default_str();
-    app.add_option("-e,--tolerance", text.tolerance, "Compression tolerance: auto (0.25/sqrt(spp)) or a value in [0, 1]")
+    app.add_option("-e,--tolerance", text.tolerance,
+                   "Compression tolerance: auto (0.25/sqrt(spp), 0.125/sqrt(spp) for a scene with an area light) or "
+                   "a value in [0, 1]")
         ->capture_default_str();
-    app.add_option("-f,--filter", text.filter, "Pixel filter: box, triangle or gaussian")
-        ->check(CLI::IsMember({"box", "triangle", "gaussian"}))
+    app.add_option("-f,--filter", text.filter,
+                   "Pixel filter: box, triangle or gaussian; auto: gaussian, box for a scene with an area light")
+        ->check(CLI::IsMember({"auto", "box", "triangle", "gaussian"}))
         ->capture_default_str();
-    app.add_option("-w,--filter-width", options.filterWidth, "Filter width in pixels, in (0, 64]")
-        ->check(finiteNumberIn(0.0, 64.0, LowerBound::Exclusive))
+    app.add_option("-w,--filter-width", text.filterWidth,
+                   "Filter width in pixels, in (0, 64]; auto: 2, 1 for a box filter under an area light")
+        ->check(autoOr(finiteNumberIn(0.0, 64.0, LowerBound::Exclusive)))
         ->capture_default_str();
     app.add_option("-m,--mip-levels", text.mipLevels, "Mip levels: auto (full pyramid) or N (1 = none)")
         ->capture_default_str();
@@ -56,8 +60,9 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
     app.add_option("-t,--tile-size", options.tileSize, "Tile size: a power of two, 2..4096")
         ->check(integerIn(2, 4096))
         ->capture_default_str();
-    app.add_option("-l,--mtsm-layers", options.mtsmLayers, "Layers per pixel, 1..255 (> 1 builds an MTSM with counts)")
-        ->check(integerIn(1, 255))
+    app.add_option("-l,--mtsm-layers", text.mtsmLayers,
+                   "Layers per pixel, 1..255 (> 1 builds an MTSM with counts); auto: 1, 2 for a scene with an area light")
+        ->check(autoOr(integerIn(1, 255)))
         ->capture_default_str();
     app.add_option("--sampler", text.sampler,
                    "How samples find surfaces: scanline (primitives bucketed by tile) or raytrace (a ray per sample)")
@@ -116,7 +121,10 @@ BuildOptions parsedBuildOptions(const BuildOptionText& text) {
     }
     if (options.tolerance && !(*options.tolerance >= 0.0 && *options.tolerance <= 1.0))
         throw std::invalid_argument("--tolerance expects auto or a value in [0, 1], got '" + text.tolerance + "'");
-    options.filter = *pixelFilterFromName(text.filter);  // CLI11 checked the name
+    // CLI11 checked these: a filter name, a number in (0, 64], an integer in [1, 255].
+    if (text.filter != "auto") options.filter = *pixelFilterFromName(text.filter);
+    if (text.filterWidth != "auto") options.filterWidth = std::stod(text.filterWidth);
+    if (text.mtsmLayers != "auto") options.mtsmLayers = std::stoi(text.mtsmLayers);
     options.sampler = text.sampler == "raytrace" ? SamplerMethod::raytrace : SamplerMethod::scanline;
     options.codec = text.codec == "zstd" ? dsm::TileCodec::Zstd : dsm::TileCodec::Zlib;
     return options;
@@ -128,12 +136,12 @@ std::vector<std::string> buildOptionArguments(const BuildOptions& options, std::
         args.insert(args.end(), {"--resolution", std::to_string(*options.width) + "x" + std::to_string(*options.height)});
     args.insert(args.end(), {"--spp", std::to_string(options.samplesPerPixel)});
     args.insert(args.end(), {"--tolerance", options.tolerance ? exactText(*options.tolerance) : "auto"});
-    args.insert(args.end(), {"--filter", filterName(options.filter)});
-    args.insert(args.end(), {"--filter-width", exactText(options.filterWidth)});
+    args.insert(args.end(), {"--filter", options.filter ? filterName(*options.filter) : "auto"});
+    args.insert(args.end(), {"--filter-width", options.filterWidth ? exactText(*options.filterWidth) : "auto"});
     args.insert(args.end(), {"--mip-levels", options.mipLevels ? std::to_string(*options.mipLevels) : "auto"});
     args.insert(args.end(), {"--level-tolerance-factor", exactText(options.levelToleranceFactor)});
     args.insert(args.end(), {"--tile-size", std::to_string(options.tileSize)});
-    args.insert(args.end(), {"--mtsm-layers", std::to_string(options.mtsmLayers)});
+    args.insert(args.end(), {"--mtsm-layers", options.mtsmLayers ? std::to_string(*options.mtsmLayers) : "auto"});
     args.insert(args.end(), {"--sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"});
     if (options.counts) args.push_back("--counts");
     args.insert(args.end(), {"--seed", std::to_string(options.seed)});

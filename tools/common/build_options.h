@@ -19,7 +19,9 @@ struct BuildOptionText {
     BuildOptions options;
     std::string resolution;
     std::string tolerance = "auto";
-    std::string filter = "gaussian";
+    std::string filter = "auto";
+    std::string filterWidth = "auto";
+    std::string mtsmLayers = "auto";
     std::string mipLevels = "auto";
     std::string sampler = "scanline";
     std::string codec = "zlib";
@@ -30,7 +32,9 @@ struct BuildOptionText {
 /// --codec, --zstd-level and --max-scene-mb on `app` (or a subcommand), bound to `text`.
 void addBuildOptions(CLI::App& app, BuildOptionText& text);
 
-/// text.options with the resolution, tolerance, mip levels and filter parsed.
+/// text.options with the resolution, tolerance, mip levels, filter, filter
+/// width and layers parsed ("auto" leaves a field unset: buildMap gives it
+/// the scene's default, dsm::resolvedBuildOptions).
 /// Throws std::invalid_argument with the usage message on a malformed value.
 BuildOptions parsedBuildOptions(const BuildOptionText& text);
 

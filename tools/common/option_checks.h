@@ -77,6 +77,13 @@ inline CLI::Validator integerIn(std::uint64_t min, std::uint64_t max) {
         "INTEGER in " + range, "integer in " + range);
 }
 
+/// CLI11 check: "auto", or a value `check` accepts.
+inline CLI::Validator autoOr(const CLI::Validator& check) {
+    return CLI::Validator(
+        [check](std::string& text) { return text == "auto" ? std::string() : check(text); },
+        "auto or " + check.get_description(), "auto or " + check.get_name());
+}
+
 /// The worker threads for a --threads request (0 = all cores): at most the
 /// cores this process may use (dsm::usableThreads, which the library applies
 /// too). A request above them is clamped, and one line on standard error says

@@ -548,8 +548,40 @@ void printStats(const Totals& totals, double seconds, const dsm::TileCacheStats&
 
 void printSoftStats(const dsm::SoftShadowStats& s, std::size_t hierarchyTiles) {
     std::cerr << kToolName << ": stats: soft " << s.queries << " queries (" << s.classifiedLit
-              << " classified lit), " << s.rays << " rays, " << s.nodesVisited << " nodes, " << s.pixelsVisited
-              << " pixels, " << s.samplesHit << " samples hit, " << hierarchyTiles << " tiles in the hierarchy\n";
+              << " classified lit), " << s.rays << " rays (" << s.raysProvenOpaque << " ended by the umbra early-out), "
+              << s.nodesVisited << " nodes, " << s.pixelsVisited << " pixels, " << s.samplesHit << " samples hit, "
+              << hierarchyTiles << " tiles in the hierarchy\n";
+}
+
+/// The statistics of printStats and printSoftStats (`soft` null for point
+/// lookups) as one JSON object on one line, for --format json.
+void printStatsJson(const Totals& totals, double seconds, const dsm::TileCacheStats& c,
+                    const dsm::SoftShadowStats* soft, std::size_t hierarchyTiles) {
+    nlohmann::ordered_json stats{
+        {"queries", totals.queries},
+        {"bad", totals.bad},
+        {"seconds", seconds},
+        {"queries_per_second", seconds > 0.0 ? double(totals.queries) / seconds : 0.0},
+        {"cache",
+         {{"hits", c.hits},
+          {"misses", c.misses},
+          {"tiles_read", c.tilesRead},
+          {"bytes_read", c.bytesRead},
+          {"read_twice", c.duplicateReads},
+          {"waits", c.waits},
+          {"evictions", c.evictions},
+          {"peak_bytes", c.peakBytesInUse},
+          {"budget_bytes", c.budgetBytes}}}};
+    if (soft)
+        stats["soft"] = {{"queries", soft->queries},
+                         {"classified_lit", soft->classifiedLit},
+                         {"rays", soft->rays},
+                         {"rays_proven_opaque", soft->raysProvenOpaque},
+                         {"nodes", soft->nodesVisited},
+                         {"pixels", soft->pixelsVisited},
+                         {"samples_hit", soft->samplesHit},
+                         {"hierarchy_tiles", hierarchyTiles}};
+    std::cerr << nlohmann::ordered_json{{"stats", stats}}.dump() << '\n';
 }
 
 /// The options that belong to one query mode only.
@@ -675,7 +707,10 @@ int run(const Options& o, const std::vector<std::array<double, 3>>& points, std:
         stop = Stop::InputError;
     }
     if (stop == Stop::OutputError) std::cerr << kToolName << ": ERROR: cannot write to standard output\n";
-    if (o.stats) {
+    if (o.stats && o.format == "json") {
+        printStatsJson(session.totals, seconds, map->cache().stats(), soft ? &soft->stats() : nullptr,
+                       tracer ? tracer->hierarchyTilesBuilt() : 0);
+    } else if (o.stats) {
         printStats(session.totals, seconds, map->cache().stats());
         if (soft) printSoftStats(soft->stats(), tracer->hierarchyTilesBuilt());
     }
@@ -731,7 +766,9 @@ int main(int argc, char** argv) {
                    "(only the placeholder answer)")
         ->check(CLI::IsMember({"stderr", "inline", "quiet"}))
         ->capture_default_str();
-    app.add_flag("--stats", o.stats, "Print throughput and tile-cache statistics to standard error at the end");
+    app.add_flag("--stats", o.stats,
+                 "Print throughput, tile-cache and soft-shadow statistics to standard error at the end (one JSON "
+                 "object with --format json)");
     app.add_option("--cache-mb", o.cacheMiB, "Tile cache budget in MiB")
         ->check(finiteNumberIn(0.0, kMaxCacheMiB))
         ->type_name("MIB")

@@ -101,12 +101,37 @@ struct TileStats {
     std::uint32_t maxVertices = 0;
 };
 
+// Defaults of a map built for an area light, chosen from the error budget
+// of soft shadows traced through the map on the examples (docs/dsm-lookup.md):
+// two layers with sample counts, so a ray sees what lies behind the first
+// opaque surface (one layer without counts: 1.7 times the hair ball's error);
+// a box filter of one pixel, whose samples are the pixel's own (a wider
+// filter lends a pixel its neighbours' occluders and darkens the penumbra;
+// the light's rays do the filtering); half the automatic tolerance (3-45 %
+// less error for about twice the file; a smaller one gained nothing more).
+constexpr int kAreaLightLayers = 2;
+constexpr double kAreaLightToleranceScale = 0.5;
+
 }  // namespace
 
-BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
+BuildOptions resolvedBuildOptions(const Scene& scene, const BuildOptions& options) {
+    BuildOptions o = options;
+    const bool areaLight = scene.light.areaLightRadius > 0.0;
+    if (!o.width) o.width = scene.light.width;
+    if (!o.height) o.height = scene.light.height;
+    if (!o.tolerance)
+        o.tolerance = autoTolerance(o.samplesPerPixel) * (areaLight ? kAreaLightToleranceScale : 1.0);
+    if (!o.filter) o.filter = areaLight ? PixelFilter::Box : PixelFilter::Gaussian;
+    if (!o.filterWidth) o.filterWidth = areaLight && *o.filter == PixelFilter::Box ? 1.0 : 2.0;
+    if (!o.mtsmLayers) o.mtsmLayers = areaLight ? kAreaLightLayers : 1;
+    return o;
+}
+
+BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& given) {
+    const BuildOptions options = resolvedBuildOptions(scene, given);
     BuildEstimate e;
-    e.width = options.width.value_or(scene.light.width);
-    e.height = options.height.value_or(scene.light.height);
+    e.width = *options.width;
+    e.height = *options.height;
     const auto& r = options.region;
     const bool whole = r == std::array<std::uint32_t, 4>{0, 0, 0, 0} || r[0] >= r[2] || r[1] >= r[3];
     e.pixels = whole ? std::uint64_t(e.width) * e.height : std::uint64_t(r[2] - r[0]) * (r[3] - r[1]);
@@ -122,7 +147,7 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
         if (w == 1 && h == 1) break;
     }
     const std::uint64_t row = std::uint64_t(e.width) * tile * perPixel;
-    const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * options.filterWidth - 0.5)));
+    const std::uint64_t reach = static_cast<std::uint64_t>(std::ceil(std::max(0.0, 0.5 * *options.filterWidth - 0.5)));
     const std::uint64_t samplePixels = (tile + 2 * reach) * (tile + 2 * reach);
     // Per sample: its data, two hits, and their transmittance prepared for the
     // sweep (four depths).
@@ -136,11 +161,15 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& options) {
 }
 
 // Errors about the output (its checks, its writing) leave carrying its path.
-BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::string& path) try {
+BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::string& path) try {
     const auto wallStart = Clock::now();
+    const BuildOptions options = resolvedBuildOptions(scene, given);
+    const double filterWidth = *options.filterWidth;
+    const int layers = *options.mtsmLayers;
+    const PixelFilter filter = *options.filter;
     LightDescription light = scene.light;
-    if (options.width) light.width = *options.width;
-    if (options.height) light.height = *options.height;
+    light.width = *options.width;
+    light.height = *options.height;
     const std::uint32_t W = light.width, H = light.height;
     const std::string where = concat("build '", path, "'");
     checkOutputPath(path);  // before the work, not after it
@@ -150,11 +179,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     if (options.samplesPerPixel < 1 || options.samplesPerPixel > 65536)
         throw Error(ErrorCode::argument,
                     concat(where, ": samples per pixel ", options.samplesPerPixel, " is not in [1, 65536]"));
-    if (!std::isfinite(options.filterWidth) || options.filterWidth <= 0.0 || options.filterWidth > 64.0)
-        throw Error(ErrorCode::argument, concat(where, ": filter width ", options.filterWidth, " is not in (0, 64]"));
-    if (options.mtsmLayers < 1 || options.mtsmLayers > 255)
-        throw Error(ErrorCode::argument,
-                    concat(where, ": MTSM layer count ", options.mtsmLayers, " is not in [1, 255]"));
+    if (!std::isfinite(filterWidth) || filterWidth <= 0.0 || filterWidth > 64.0)
+        throw Error(ErrorCode::argument, concat(where, ": filter width ", filterWidth, " is not in (0, 64]"));
+    if (layers < 1 || layers > 255)
+        throw Error(ErrorCode::argument, concat(where, ": MTSM layer count ", layers, " is not in [1, 255]"));
     std::array<std::uint32_t, 4> region = options.region;
     if (region == std::array<std::uint32_t, 4>{0, 0, 0, 0}) region = {0, 0, W, H};
     if (region[0] >= region[2] || region[1] >= region[3] || region[2] > W || region[3] > H)
@@ -164,12 +192,12 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     const LightCamera camera = lightCamera(light);
     const detail::LightRayFrame frame = detail::lightRayFrame(camera, W, H);
     const int channels = scene.isColoured() ? 3 : 1;
-    const bool counts = options.counts || options.mtsmLayers > 1;
+    const bool counts = options.counts || layers > 1;
     const std::uint32_t spp = options.samplesPerPixel;
-    const double tolerance = options.tolerance.value_or(autoTolerance(spp));
+    const double tolerance = *options.tolerance;
     if (!std::isfinite(tolerance) || tolerance < 0.0)
         throw Error(ErrorCode::argument, concat(where, ": tolerance ", tolerance, " is not a finite value >= 0"));
-    const double radius = 0.5 * options.filterWidth;
+    const double radius = 0.5 * filterWidth;
     const int reach = std::max(0, static_cast<int>(std::ceil(radius - 0.5)));  // neighbour pixels with samples in range
     const std::uint32_t gridY = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(spp)))));
     const std::uint32_t gridX = (spp + gridY - 1) / gridY;
@@ -183,10 +211,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     w.tileSize = options.tileSize;
     w.channels = channels;
     w.counts = counts;
-    w.maxLayers = options.mtsmLayers;
+    w.maxLayers = layers;
     w.camera = camera;
-    w.filter = options.filter;
-    w.filterWidth = options.filterWidth;
+    w.filter = filter;
+    w.filterWidth = filterWidth;
     w.tolerance = tolerance;
     w.mipLevels = options.mipLevels;
     w.levelToleranceFactor = options.levelToleranceFactor;
@@ -210,10 +238,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
              {{"resolution", {W, H}},
               {"spp", spp},
               {"tolerance", tolerance},
-              {"filter", filterName(options.filter)},
-              {"filter_width", options.filterWidth},
+              {"filter", filterName(filter)},
+              {"filter_width", filterWidth},
               {"tile_size", options.tileSize},
-              {"mtsm_layers", options.mtsmLayers},
+              {"mtsm_layers", layers},
               {"area_light_radius", light.areaLightRadius},
               {"seed", options.seed},
               {"sampler", scanline ? "scanline" : "raytrace"},
@@ -229,7 +257,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
     compression.tolerance = compressorTolerance(tolerance);
     compression.channels = channels;
     compression.keepCounts = counts;
-    compression.maxLayers = options.mtsmLayers;
+    compression.maxLayers = layers;
 
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::optional<ScanlineHider> hider;
@@ -364,7 +392,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& options, const std::
                         const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
                         for (std::size_t i = first; i < first + spp; ++i) {
                             const SampleData& s = samples[i];
-                            const double wgt = filterWeight(options.filter, radius, s.x - cx, s.y - cy);
+                            const double wgt = filterWeight(filter, radius, s.x - cx, s.y - cy);
                             if (wgt <= 0.0) continue;
                             const SampleRay ray{s.hits, s.volume};
                             if (!ws.built[i]) {

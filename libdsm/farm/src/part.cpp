@@ -112,19 +112,21 @@ std::string sceneContentHash(const Scene& scene) {
     return hash.hex();
 }
 
-FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& options, FarmGrid grid) {
-    const BuildEstimate size = estimateBuild(scene, options);
+FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& given, FarmGrid grid) {
+    // The defaults the scene gets (its area light's, say) are those of the
+    // build, except the automatic tolerance, which stays "auto" as given.
+    const BuildOptions options = resolvedBuildOptions(scene, given);
     return {{"scene_sha256", sceneContentHash(scene)},
-            {"width", std::to_string(size.width)},
-            {"height", std::to_string(size.height)},
+            {"width", std::to_string(*options.width)},
+            {"height", std::to_string(*options.height)},
             {"spp", std::to_string(options.samplesPerPixel)},
-            {"tolerance", options.tolerance ? exactText(*options.tolerance) : "auto"},
-            {"filter", filterName(options.filter)},
-            {"filter_width", exactText(options.filterWidth)},
+            {"tolerance", given.tolerance ? exactText(*given.tolerance) : "auto"},
+            {"filter", filterName(*options.filter)},
+            {"filter_width", exactText(*options.filterWidth)},
             {"mip_levels", options.mipLevels ? std::to_string(*options.mipLevels) : "auto"},
             {"level_tolerance_factor", exactText(options.levelToleranceFactor)},
             {"tile_size", std::to_string(options.tileSize)},
-            {"mtsm_layers", std::to_string(options.mtsmLayers)},
+            {"mtsm_layers", std::to_string(*options.mtsmLayers)},
             {"counts", options.counts ? "true" : "false"},
             {"seed", std::to_string(options.seed)},
             {"sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"},

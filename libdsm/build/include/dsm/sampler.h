@@ -40,11 +40,14 @@ struct BuildOptions {
     /// are stratified likewise, spp strata in random order.
     std::uint32_t samplesPerPixel = 16;
     /// Compression tolerance, finite and >= 0; unset (automatic) = 0.25 /
-    /// sqrt(samples per pixel) (Lokovic & Veach §4).
+    /// sqrt(samples per pixel) (Lokovic & Veach §4), or for a scene with an
+    /// area light half that.
     std::optional<double> tolerance;
-    PixelFilter filter = PixelFilter::Gaussian;
-    /// Filter width in pixels (the footprint's diameter).
-    double filterWidth = 2.0;
+    /// Pixel filter; unset = Gaussian, or for a scene with an area light box.
+    std::optional<PixelFilter> filter;
+    /// Filter width in pixels (the footprint's diameter); unset = 2, or 1 for
+    /// the box filter of a scene with an area light.
+    std::optional<double> filterWidth;
     /// As WriterOptions::mipLevels: 1 = no mip-maps, N levels; unset = full pyramid.
     std::optional<unsigned> mipLevels;
     /// As WriterOptions::levelToleranceFactor: each coarser level's tolerance
@@ -53,8 +56,9 @@ struct BuildOptions {
     /// grows by one tolerance per level; docs/dsm-build.md measures both).
     double levelToleranceFactor = 0.5;
     std::uint32_t tileSize = 32;
-    /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts).
-    int mtsmLayers = 1;
+    /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts);
+    /// unset = 1, or for a scene with an area light 2.
+    std::optional<int> mtsmLayers;
     /// Store sample counts even without MTSM layers.
     bool counts = false;
     /// Pixel rectangle [x0, x1) x [y0, y1) to build; the rest of the map is
@@ -111,6 +115,15 @@ struct BuildEstimate {
     /// and each worker's samples of one tile with their transmittances.
     std::uint64_t memoryBytes = 0;
 };
+
+/// The options a build of `scene` uses: `options` with every unset field
+/// that has a default set to it (size, tolerance, filter, filter width,
+/// layers). A scene whose light has an area light (area_radius > 0) is built
+/// for soft shadows traced through the map, and gets defaults chosen for that
+/// from the measured error budget (docs/dsm-lookup.md, "Where the error comes
+/// from"); any other scene gets the plain deep shadow map's. Fields the caller
+/// set are kept as they are (and not checked: buildMap does that).
+DSM_API BuildOptions resolvedBuildOptions(const Scene& scene, const BuildOptions& options);
 
 /// The estimate for buildMap(scene, options, ...), without building; options
 /// are not checked (buildMap does that).
