@@ -224,6 +224,7 @@ TEST(ScanlineHider, FindsHairCrossingsAtTheRibbonsEdges) {
         SCOPED_TRACE("orthographic");
         expectHiderFindsRibbonEdges(distant, 512);
     }
+}
 
 // The bucketing projects the primitives on the build's threads: with
 // thousands of them (split among the threads) a build is the same to the
