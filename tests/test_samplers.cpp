@@ -226,6 +226,32 @@ TEST(ScanlineHider, FindsHairCrossingsAtTheRibbonsEdges) {
     }
 }
 
+// A tile holding more samples than a worker keeps at once is built in bands
+// of rows, each sampling its border rows again: its pixels must equal those
+// of a build whose smaller tiles fit whole (18² x 4096 samples against
+// 10² x 4096).
+TEST(Samplers, TilesBuiltInBandsGiveTheSamePixels) {
+    const TempDir dir;
+    const dsm::Scene scene = dsm::parseScene(R"({
+      "light": {"type": "spot", "position": [0, 4, 0], "look_at": [0, 0, 0], "up": [0, 0, -1], "fov": 30,
+                "resolution": [16, 16]},
+      "objects": [
+        {"type": "sphere", "name": "ball", "center": [0.2, 1, 0], "radius": 0.5, "opacity": 0.6},
+        {"type": "plane", "name": "ground", "normal": [0, 1, 0], "size": 20}
+      ]})",
+                                             dir.path().string(), "bands.json");
+    dsm::BuildOptions options;
+    options.samplesPerPixel = 4096;
+    options.threads = 2;
+    options.tileSize = 16;  // one tile of 18² sample pixels: 1.3 M samples, in bands
+    const std::string banded = (dir / "banded.dsm").string();
+    dsm::buildMap(scene, options, banded);
+    options.tileSize = 8;  // tiles of 10² sample pixels: 410 k samples each, whole
+    const std::string whole = (dir / "whole.dsm").string();
+    dsm::buildMap(scene, options, whole);
+    expectSamePixels(*dsm::DeepShadowMap::open(banded), *dsm::DeepShadowMap::open(whole));
+}
+
 // The bucketing projects the primitives on the build's threads: with
 // thousands of them (split among the threads) a build is the same to the
 // byte with one thread as with two.

@@ -40,6 +40,9 @@ using detail::concat;
 namespace {
 
 using Clock = std::chrono::steady_clock;
+// Samples a worker holds at once for one tile (see computeTile).
+constexpr std::size_t kBandSamples = std::size_t(1) << 20;
+
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 // Weight of a sample at offset (dx, dy) pixels from a pixel centre.
@@ -359,68 +362,81 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
         const std::uint32_t rx0 = std::max(x0, region[0]), rx1 = std::min(x1, region[2]);
         const std::uint32_t ry0 = std::max(y0, region[1]), ry1 = std::min(y1, region[3]);
         if (rx0 >= rx1 || ry0 >= ry1) return;
-        // Sample pixels whose samples can reach them.
+        // Sample pixels whose samples can reach them. A tile's samples are all
+        // held at once (crossings, transmittances, sweep inputs), so a tile with
+        // more than kBandSamples of them is built in bands of rows, each
+        // sampling its own border rows again: memory stays bounded at high
+        // samples per pixel, and since a pixel's samples and the order of its
+        // inputs do not depend on the band, the map is the same.
         const std::uint32_t sx0 = rx0 >= std::uint32_t(reach) ? rx0 - reach : 0, sx1 = std::min(rx1 + reach, W);
-        const std::uint32_t sy0 = ry0 >= std::uint32_t(reach) ? ry0 - reach : 0, sy1 = std::min(ry1 + reach, H);
         const std::uint32_t sw = sx1 - sx0;
-        TileWorkspace& ws = workspaces.local();
-        const std::size_t sampleCount = sampleTile(tx, ty, {sx0, sy0, sx1, sy1}, ws, stats);
-        const std::span<const SampleData> samples(ws.samples.data(), sampleCount);
-        for (std::uint32_t y = ry0; y < ry1; ++y)
-            for (std::uint32_t x = rx0; x < rx1; ++x) {
-                const auto s = samples.subspan((std::size_t(y - sy0) * sw + (x - sx0)) * spp, spp);
-                for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
-                if (options.sampleRays) {
-                    ws.rays.clear();
-                    for (const SampleData& d : s) ws.rays.push_back({d.hits, d.volume});
-                    options.sampleRays(x, y, ws.rays);
-                }
-            }
-        if (ws.transmittances.size() < sampleCount) ws.transmittances.resize(sampleCount);
-        ws.built.assign(sampleCount, 0);
-        constexpr float kFromTheStart = -std::numeric_limits<float>::infinity();
-        for (std::uint32_t y = ry0; y < ry1; ++y)
-            for (std::uint32_t x = rx0; x < rx1; ++x) {
-                const auto start = Clock::now();
-                ws.rays.clear();
-                ws.inputs.clear();
-                ws.weights.clear();
-                const double cx = x + 0.5, cy = y + 0.5;
-                for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
-                    for (std::uint32_t nx = (x >= std::uint32_t(reach) ? x - reach : 0); nx < std::min(x + reach + 1, W);
-                         ++nx) {
-                        const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
-                        for (std::size_t i = first; i < first + spp; ++i) {
-                            const SampleData& s = samples[i];
-                            const double wgt = filterWeight(filter, radius, s.x - cx, s.y - cy);
-                            if (wgt <= 0.0) continue;
-                            const SampleRay ray{s.hits, s.volume};
-                            if (!ws.built[i]) {
-                                try {
-                                    ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.tau);
-                                    ws.transmittances[i].assign(ws.tau);
-                                } catch (const Error& e) {
-                                    throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ",
-                                                                 ws.rays.size(), ": ", e.what()));
-                                }
-                                ws.built[i] = 1;
-                            }
-                            ws.rays.push_back(ray);
-                            ws.inputs.push_back(&ws.transmittances[i]);
-                            ws.weights.push_back(wgt);
-                        }
+        const std::size_t rowSamples = std::size_t(sw) * spp;
+        const std::size_t bandLimit = kBandSamples / rowSamples;
+        const std::uint32_t bandRows = bandLimit > std::size_t(2 * reach + 1)
+                                           ? static_cast<std::uint32_t>(std::min<std::size_t>(bandLimit - 2 * reach, ry1 - ry0))
+                                           : 1u;
+        for (std::uint32_t by0 = ry0; by0 < ry1; by0 += bandRows) {
+            const std::uint32_t by1 = std::min(by0 + bandRows, ry1);
+            const std::uint32_t sy0 = by0 >= std::uint32_t(reach) ? by0 - reach : 0, sy1 = std::min(by1 + reach, H);
+            TileWorkspace& ws = workspaces.local();
+            const std::size_t sampleCount = sampleTile(tx, ty, {sx0, sy0, sx1, sy1}, ws, stats);
+            const std::span<const SampleData> samples(ws.samples.data(), sampleCount);
+            for (std::uint32_t y = by0; y < by1; ++y)
+                for (std::uint32_t x = rx0; x < rx1; ++x) {
+                    const auto s = samples.subspan((std::size_t(y - sy0) * sw + (x - sx0)) * spp, spp);
+                    for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
+                    if (options.sampleRays) {
+                        ws.rays.clear();
+                        for (const SampleData& d : s) ws.rays.push_back({d.hits, d.volume});
+                        options.sampleRays(x, y, ws.rays);
                     }
-                stats.timings.transmittanceSeconds += since(start);
-                VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
-                if (ws.rays.empty()) continue;  // a filter too narrow to catch a sample
-                try {
-                    f = ws.pixel.build(ws.inputs, ws.rays, ws.weights, &stats.timings);
-                } catch (const Error& e) {
-                    throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                 }
-                stats.vertices += f.size();
-                stats.maxVertices = std::max(stats.maxVertices, static_cast<std::uint32_t>(f.size()));
-            }
+            if (ws.transmittances.size() < sampleCount) ws.transmittances.resize(sampleCount);
+            ws.built.assign(sampleCount, 0);
+            constexpr float kFromTheStart = -std::numeric_limits<float>::infinity();
+            for (std::uint32_t y = by0; y < by1; ++y)
+                for (std::uint32_t x = rx0; x < rx1; ++x) {
+                    const auto start = Clock::now();
+                    ws.rays.clear();
+                    ws.inputs.clear();
+                    ws.weights.clear();
+                    const double cx = x + 0.5, cy = y + 0.5;
+                    for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
+                        for (std::uint32_t nx = (x >= std::uint32_t(reach) ? x - reach : 0); nx < std::min(x + reach + 1, W);
+                             ++nx) {
+                            const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
+                            for (std::size_t i = first; i < first + spp; ++i) {
+                                const SampleData& s = samples[i];
+                                const double wgt = filterWeight(filter, radius, s.x - cx, s.y - cy);
+                                if (wgt <= 0.0) continue;
+                                const SampleRay ray{s.hits, s.volume};
+                                if (!ws.built[i]) {
+                                    try {
+                                        ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.tau);
+                                        ws.transmittances[i].assign(ws.tau);
+                                    } catch (const Error& e) {
+                                        throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ",
+                                                                     ws.rays.size(), ": ", e.what()));
+                                    }
+                                    ws.built[i] = 1;
+                                }
+                                ws.rays.push_back(ray);
+                                ws.inputs.push_back(&ws.transmittances[i]);
+                                ws.weights.push_back(wgt);
+                            }
+                        }
+                    stats.timings.transmittanceSeconds += since(start);
+                    VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
+                    if (ws.rays.empty()) continue;  // a filter too narrow to catch a sample
+                    try {
+                        f = ws.pixel.build(ws.inputs, ws.rays, ws.weights, &stats.timings);
+                    } catch (const Error& e) {
+                        throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
+                    }
+                    stats.vertices += f.size();
+                    stats.maxVertices = std::max(stats.maxVertices, static_cast<std::uint32_t>(f.size()));
+                }
+        }
     };
 
     BuildStats result;
