@@ -39,21 +39,35 @@ bool tileRange(double lo, double hi, std::uint32_t size, std::uint32_t reach, st
 // so the sample's distance from that axis is at most r times the raster
 // stretch. The bound is widened by 1 % so rounding never rejects a crossing
 // the exact test would find; the exact test still decides.
-double rasterStretch(const LightCamera& camera, std::uint32_t width, std::uint32_t height, double zMin, double uMax,
-                     double vMax) {
-    const auto& m = camera.worldToLight;
-    const auto rowNorm = [&](int r) {
-        return std::sqrt(m[4 * r] * m[4 * r] + m[4 * r + 1] * m[4 * r + 1] + m[4 * r + 2] * m[4 * r + 2]);
-    };
-    const auto& w = camera.screenWindow;
-    const double ax = width / std::abs(w[1] - w[0]), ay = height / std::abs(w[3] - w[2]);
-    double sx = ax * rowNorm(0), sy = ay * rowNorm(1);
-    if (camera.projection == Projection::Perspective) {
-        sx = ax * (rowNorm(0) + uMax * rowNorm(2)) / zMin;
-        sy = ay * (rowNorm(1) + vMax * rowNorm(2)) / zMin;
+// The camera's part of that bound, the same for every primitive: raster units
+// per unit of x/z and y/z (or of x, y), and the light-space rows' norms.
+struct RasterStretch {
+    double ax, ay, nx, ny, nz;
+    bool perspective;
+
+    RasterStretch(const LightCamera& camera, std::uint32_t width, std::uint32_t height) {
+        const auto& m = camera.worldToLight;
+        const auto rowNorm = [&](int r) {
+            return std::sqrt(m[4 * r] * m[4 * r] + m[4 * r + 1] * m[4 * r + 1] + m[4 * r + 2] * m[4 * r + 2]);
+        };
+        const auto& w = camera.screenWindow;
+        ax = width / std::abs(w[1] - w[0]);
+        ay = height / std::abs(w[3] - w[2]);
+        nx = rowNorm(0);
+        ny = rowNorm(1);
+        nz = rowNorm(2);
+        perspective = camera.projection == Projection::Perspective;
     }
-    return 1.01 * std::sqrt(sx * sx + sy * sy);
-}
+
+    double at(double zMin, double uMax, double vMax) const {
+        double sx = ax * nx, sy = ay * ny;
+        if (perspective) {
+            sx = ax * (nx + uMax * nz) / zMin;
+            sy = ay * (ny + vMax * nz) / zMin;
+        }
+        return 1.01 * std::sqrt(sx * sx + sy * sy);
+    }
+};
 
 }  // namespace
 
@@ -99,13 +113,14 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         bool any;
     };
     std::vector<TileRect> rects(primitives.size());
+    const RasterStretch cameraStretch(camera, width, height);
     // Each primitive's raster bounds, footprint and tile rectangle, in
     // parallel (each writes only its own entries, so any split gives the same).
     auto place = [&](std::size_t i) {
         const Bounds3 b = surfaces.bounds(primitives[i]);
         RasterBounds r{kInf, kInf, -kInf, -kInf};
         bool inFront = false, behindLight = false;
-        double zMin = kInf, uMax = 0.0, vMax = 0.0;  // over the box's corners (see rasterStretch)
+        double zMin = kInf, uMax = 0.0, vMax = 0.0;  // over the box's corners (see RasterStretch)
         for (int corner = 0; corner < 8; ++corner) {
             const Vec3 world{(corner & 1) ? b.hi[0] : b.lo[0], (corner & 2) ? b.hi[1] : b.lo[1],
                              (corner & 4) ? b.hi[2] : b.lo[2]};
@@ -141,7 +156,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         if (p.kind == PrimitiveKind::Segment && !behindLight && zMin > 0.0 && surfaces.motion(p.object) == Vec3{}) {
             const ScenePrimitives::Segment& s = surfaces.segment(p);
             double x0, y0, x1, y1, z;
-            const double stretch = rasterStretch(camera, width, height, zMin, uMax, vMax);
+            const double stretch = cameraStretch.at(zMin, uMax, vMax);
             if (camera.lightToRaster(camera.worldToLightSpace(s.p0), int(width), int(height), x0, y0, z) &&
                 camera.lightToRaster(camera.worldToLightSpace(s.p1), int(width), int(height), x1, y1, z) &&
                 std::isfinite(stretch)) {
