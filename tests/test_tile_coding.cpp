@@ -17,6 +17,7 @@
 #include "map_fixtures.h"
 #include "oracle.h"
 #include "temp_dir.h"
+#include "byte_io.h"
 #include "format_layout.h"
 #include "tile_codec.h"
 
@@ -93,6 +94,46 @@ TEST(TileCoding, Crc32MatchesItsBitwiseDefinitionAtEveryLengthAndAlignment) {
                 << offset << " + " << size;
     for (const std::size_t size : {1023u, 4096u, 4101u, 65535u, 69984u})
         EXPECT_EQ(dsm::format::crc32(bytes.data() + 3, size), bitwise(bytes.data() + 3, size)) << size;
+}
+
+// The word-at-a-time read of the depth ends against the byte-by-byte one,
+// value by value: every length at its boundaries, values beyond 32 bits (a
+// fifth byte above 0x0F, no end within 5 bytes), each followed by the bytes
+// of the next values, which must be where both readers left off.
+TEST(TileCoding, TheBranchlessVarintReadMatchesTheByteByByteOne) {
+    std::vector<std::vector<std::uint8_t>> encodings;
+    for (const std::uint32_t v : {0u, 1u, 127u, 128u, 300u, 16383u, 16384u, (1u << 21) - 1, 1u << 21,
+                                  (1u << 28) - 1, 1u << 28, 0x12345678u, 0xFFFFFFFFu}) {
+        std::vector<std::uint8_t> bytes;
+        dsm::detail::ByteWriter(bytes).varint(v);
+        encodings.push_back(bytes);
+    }
+    encodings.push_back({0x80, 0x80, 0x80, 0x80, 0x10});        // 2^32: a fifth byte above 0x0F
+    encodings.push_back({0xFF, 0xFF, 0xFF, 0xFF, 0x7F});        // beyond 32 bits
+    encodings.push_back({0x80, 0x80, 0x80, 0x80, 0x80, 0x01});  // no end within 5 bytes
+    encodings.push_back({0x81, 0x80, 0x00});                    // an over-long 1
+    std::mt19937 rng(3);
+    for (int trial = 0; trial < 2000; ++trial) {
+        std::vector<std::uint8_t> bytes;
+        std::size_t count = 1 + rng() % 6;
+        for (std::size_t k = 0; k < count; ++k) {
+            const auto& e = encodings[rng() % encodings.size()];
+            bytes.insert(bytes.end(), e.begin(), e.end());
+        }
+        const std::size_t payload = bytes.size();
+        bytes.resize(payload + 5 * count + 8, 0x00);
+        dsm::detail::VarintReader checked(bytes.data(), bytes.data() + payload);
+        dsm::detail::VarintReader words(bytes.data(), bytes.data() + bytes.size());
+        ASSERT_TRUE(words.holdsWords(count));
+        for (std::size_t k = 0; k < count && checked.ok(); ++k) {
+            const std::uint32_t expected = checked.next();
+            const std::uint32_t got = words.nextBranchless();
+            ASSERT_EQ(words.ok(), checked.ok()) << "trial " << trial << " value " << k;
+            if (!checked.ok()) break;
+            ASSERT_EQ(got, expected) << "trial " << trial << " value " << k;
+            ASSERT_EQ(bytes.size() - words.remaining(), payload - checked.remaining()) << "trial " << trial;
+        }
+    }
 }
 
 TEST(TileCoding, ValueStepIsThePowerOfTwoWithinAnEighthOfTheTolerance) {

@@ -519,31 +519,35 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
     return bits;
 }
 
-// PREDICTED_DEPTHS (spec §7): the ends of every pixel, each from the previous
-// non-empty pixel's, then the steps between them.
-void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std::size_t pixels, float* z,
-                           DecodeChecks& tileChecks) {
-    VarintReader r = reader;  // local copies, kept in registers
-    DecodeChecks checks = tileChecks;
+// The ends of every pixel, each from the previous non-empty pixel's (zigzag
+// differences). `Words`: read by VarintReader::nextBranchless(), the run
+// checked once; their lengths vary from pixel to pixel.
+template <bool Words>
+[[gnu::always_inline]] inline void decodeDepthEnds(VarintReader& r, const PixelRecord* records, std::size_t pixels,
+                                                   float* z, DecodeChecks& checks) {
+    const auto next = [&r] { return Words ? r.nextBranchless() : r.next(); };
     std::uint32_t previousFirst = 0, previousLast = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
         if (a == b) continue;
-        std::uint32_t first = previousFirst, last = previousLast;
-        if (b - a > 1) {
-            std::uint32_t codes[2];
-            r.forEach(2, [&](std::size_t i, std::uint32_t code) { codes[i] = code; });
-            first += unzigzag(codes[0]);
-            last += unzigzag(codes[1]);
-        } else {
-            last = first += unzigzag(r.next());
-        }
+        const std::uint32_t first = previousFirst + unzigzag(next());
+        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(next()) : first;
         previousFirst = first;
         previousLast = last;
         noteDepthEnds(first, last, checks);
         z[a] = std::bit_cast<float>(first);
         z[b - 1] = std::bit_cast<float>(last);
     }
+}
+
+// PREDICTED_DEPTHS (spec §7): the ends of every pixel, then the steps
+// between them.
+void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std::size_t pixels, float* z,
+                           DecodeChecks& tileChecks) {
+    VarintReader r = reader;  // local copies, kept in registers
+    DecodeChecks checks = tileChecks;
+    if (r.holdsWords(2 * pixels)) decodeDepthEnds<true>(r, records, pixels, z, checks);
+    else decodeDepthEnds<false>(r, records, pixels, z, checks);
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
         if (b - a < 3) continue;
