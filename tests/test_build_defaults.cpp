@@ -10,6 +10,8 @@
 #include <dsm/sampler.h>
 #include <dsm/scene.h>
 
+#include <algorithm>
+#include <cmath>
 #include <string>
 
 #include "map_fixtures.h"
@@ -114,3 +116,40 @@ TEST(BuildDefaults, ResolvedOptionsAreTheBuildsAndKeepWhatIsSet) {
 }
 
 }  // namespace
+
+// --centred-compression: recorded in the metadata, and every level of the map
+// within its stated error bound of the exact one (built from the same samples
+// at tolerance 0, whose coarser levels are then exact averages).
+TEST(BuildDefaults, CentredCompressionIsRecordedAndEveryLevelKeepsItsBound) {
+    TempDir dir;
+    const dsm::Scene scene = squareScene(dir, 0.0);
+    const std::string exactPath = (dir / "exact.dsm").string(), centredPath = (dir / "centred.dsm").string();
+    dsm::BuildOptions options = smallBuild();
+    options.samplesPerPixel = 16;
+    options.tileSize = 4;
+    options.tolerance = 0.0;
+    dsm::buildMap(scene, options, exactPath);
+    options.tolerance.reset();
+    options.centredCompression = true;
+    dsm::buildMap(scene, options, centredPath);
+    const auto exact = dsm::DeepShadowMap::open(exactPath);
+    const auto centred = dsm::DeepShadowMap::open(centredPath);
+    EXPECT_NE(centred->info().metadata.find(R"("compression":"centred")"), std::string::npos);
+    EXPECT_EQ(exact->info().metadata.find(R"("compression")"), std::string::npos);
+    ASSERT_EQ(centred->info().levels.size(), exact->info().levels.size());
+    for (unsigned l = 0; l < centred->info().levels.size(); ++l) {
+        const dsm::LevelInfo& L = centred->info().levels[l];
+        double worst = 0.0;
+        for (std::uint32_t y = 0; y < L.height; ++y)
+            for (std::uint32_t x = 0; x < L.width; ++x) {
+                const dsm::PixelFunction a = exact->pixel(l, x, y), b = centred->pixel(l, x, y);
+                const dsm::VisibilityView va = a.view(), vb = b.view();
+                for (const dsm::VisibilityView* f : {&va, &vb})
+                    for (std::size_t i = 0; i < f->size(); ++i)
+                        for (const double z : {double(f->z(i)), std::nextafter(double(f->z(i)), 0.0)})
+                            worst = std::max(worst, std::abs(va.evaluate(z) - vb.evaluate(z)));
+            }
+        EXPECT_LE(worst, L.errorBound + 1e-6) << "level " << l;
+        EXPECT_GT(worst, 0.0) << "level " << l;
+    }
+}

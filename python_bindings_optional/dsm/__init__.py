@@ -158,8 +158,9 @@ def build(scene: Union[str, os.PathLike, Mapping[str, Any]], out_path, **options
     scene: a scene file path or a dict in the scene format (spec/scene.md).
     options: the options of dsm-build with underscores: resolution (N or
     (W, H)), spp, tolerance ("auto" or a number), filter, filter_width,
-    mip_levels ("auto" or N), tile_size, mtsm_layers, counts, region
-    ((x0, y0, x1, y1)), threads, seed, zlib_level. tolerance, filter,
+    mip_levels ("auto" or N), tile_size, mtsm_layers, counts,
+    centred_compression, region ((x0, y0, x1, y1)), threads, seed,
+    zlib_level. tolerance, filter,
     filter_width and mtsm_layers left out (or "auto") take the scene's
     defaults: those of a map for soft shadows when the light has an
     area_radius (dsm-build's documentation).

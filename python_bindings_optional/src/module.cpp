@@ -363,6 +363,7 @@ dsm::BuildOptions buildOptions(const py::dict& kwargs) {
             if (!py::isinstance<py::str>(value)) o.mtsmLayers = value.cast<int>();  // a string: "auto"
         }
         else if (key == "counts") o.counts = value.cast<bool>();
+        else if (key == "centred_compression") o.centredCompression = value.cast<bool>();
         else if (key == "region") o.region = value.cast<std::array<std::uint32_t, 4>>();
         else if (key == "threads") {
             if (value.cast<unsigned>() != 0) o.threads = value.cast<unsigned>();  // 0: all cores

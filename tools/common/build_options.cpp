@@ -69,6 +69,9 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
         ->check(CLI::IsMember({"scanline", "raytrace"}))
         ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
+    app.add_flag("--centred-compression", options.centredCompression,
+                 "Centre compressed segments on their input (mean signed error within eps/10 on plateaus and ramps); "
+                 "larger maps");
     app.add_option("--seed", options.seed, "Random seed, an integer in [0, 2^64 - 1]")
         ->check(integerIn(0, UINT64_MAX))
         ->capture_default_str();
@@ -144,6 +147,7 @@ std::vector<std::string> buildOptionArguments(const BuildOptions& options, std::
     args.insert(args.end(), {"--mtsm-layers", options.mtsmLayers ? std::to_string(*options.mtsmLayers) : "auto"});
     args.insert(args.end(), {"--sampler", options.sampler == SamplerMethod::raytrace ? "raytrace" : "scanline"});
     if (options.counts) args.push_back("--counts");
+    if (options.centredCompression) args.push_back("--centred-compression");
     args.insert(args.end(), {"--seed", std::to_string(options.seed)});
     args.insert(args.end(), {"--zlib-level", std::to_string(options.zlibLevel)});
     args.insert(args.end(), {"--codec", options.codec == dsm::TileCodec::Zstd ? "zstd" : "zlib"});

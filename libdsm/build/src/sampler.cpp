@@ -221,6 +221,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     w.tolerance = tolerance;
     w.mipLevels = options.mipLevels;
     w.levelToleranceFactor = options.levelToleranceFactor;
+    w.centredCompression = options.centredCompression;
     w.zlibLevel = options.zlibLevel;
     w.codec = options.codec;
     w.zstdLevel = options.zstdLevel;
@@ -249,6 +250,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
               {"seed", options.seed},
               {"sampler", scanline ? "scanline" : "raytrace"},
               {"region", region}}}};
+        if (options.centredCompression) m["settings"]["compression"] = "centred";
         if (scene.source.size() <= 65536) m["scene_json"] = scene.source;
         w.metadata = m.dump();
     }
@@ -261,6 +263,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     compression.channels = channels;
     compression.keepCounts = counts;
     compression.maxLayers = layers;
+    compression.centred = options.centredCompression;
 
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::optional<ScanlineHider> hider;

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <limits>
 #include <utility>
+#include <vector>
 
 #ifdef __SSE2__
 #include <emmintrin.h>
@@ -19,6 +20,10 @@ namespace {
 // Largest rounding error of a value in [0, 1] stored as float32: half the
 // float spacing just below 1.
 constexpr double kStoreRounding = 0x1p-25;
+
+// A segment is balanced when a feasible line's signed error against the input
+// averages to at most this share of the band over the segment.
+constexpr double kBalance = 0.1;
 
 // pushValid() checks its input only in debug builds.
 #ifdef NDEBUG
@@ -87,10 +92,18 @@ struct SlopeWindow {
 // stored nothing (V = 1 is implicit before the first vertex). The channel
 // count (1 or 3) is a template argument of the per-vertex work, and a
 // 1-channel builder can be widened to 3 mid-stream (see widen()).
+struct PendingVertex {
+    float z;
+    double v[kMaxChannels];
+    std::uint32_t count;
+    double band;
+};
+
 class Greedy {
 public:
-    Greedy(int channels, double tolerance, bool keepCounts)
+    Greedy(int channels, double tolerance, bool keepCounts, bool centred)
         : channels_(channels),
+          centred_(centred),
           // Leave room for the float rounding of segment end points, so that the
           // stored function, not just the ideal line, is within tolerance.
           band_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
@@ -118,13 +131,19 @@ public:
     // extendRun() of one vertex, inlined: the per-vertex push() path.
     template <int C>
     [[gnu::flatten]] bool extendOne(float z, const double* v, std::uint32_t count, double band) {
-        return extendRun<C, true>(&z, v, &count, 1, band) == 1;
+        return (centred_ ? extendRun<C, true, true>(&z, v, &count, 1, band)
+                         : extendRun<C, true, false>(&z, v, &count, 1, band)) == 1;
     }
 
     // push() of a vertex that does not extend the open segment (if any).
     template <int C>
     void pushBeyond(float z, const double* v, std::uint32_t count, double band) {
-        if (open_) closeSegment<C>();
+        if (open_ && closeSegment<C>()) {
+            // Closed at its balanced point and the vertices after it taken
+            // again: this one goes after them.
+            push<C>(z, v, count, band);
+            return;
+        }
         if (z == originZ_) {
             absorbAtOrigin<C>(v, count, band);
             return;
@@ -132,6 +151,7 @@ public:
         open<C>(z, v, band);
         lastZ_ = z;
         segmentCount_ += count;
+        if (centred_) noteBalance<C>(window_, twiceIntegral_, inputV_, z, v, count, band, segmentCount_);
     }
 
     // Extends the open segment by the leading vertices of a run that fit it:
@@ -150,14 +170,17 @@ public:
     template <int C, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if (!open_) return 0;
-        return counts ? extendRun<C, true>(z, v, counts, n, band) : extendRun<C, false>(z, v, counts, n, band);
+        if (centred_)
+            return counts ? extendRun<C, true, true>(z, v, counts, n, band)
+                          : extendRun<C, false, true>(z, v, counts, n, band);
+        return counts ? extendRun<C, true, false>(z, v, counts, n, band) : extendRun<C, false, false>(z, v, counts, n, band);
     }
 
     // A vertex that moves bounds updates them by branches for one channel (on
     // smooth input nearly every vertex moves the same bound, and a select
     // would chain each vertex's comparison to the previous one's result) and
     // by selects for RGB (six bounds make too many branches to predict).
-    template <int C, bool withCounts, typename T>
+    template <int C, bool withCounts, bool Centred, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         SlopeWindow w[C];
         Double2 origin[C];
@@ -168,6 +191,14 @@ public:
         const Double2 halfWidth = {band, -band};
         const Double2 negateLower = {1.0, -1.0};
         const double originZ = originZ_;
+        // Centred: the input's integral over the segment so far (twice it:
+        // the trapezoids' halves are left out), and its last vertex.
+        double twiceIntegral[C], previousV[C];
+        double previousZ = lastZ_;
+        forEachChannel<C>([&](int c) {
+            twiceIntegral[c] = twiceIntegral_[c];
+            previousV[c] = inputV_[c];
+        });
         std::uint64_t count = 0;
         std::size_t i = 0;
         for (; i < n; ++i) {
@@ -215,8 +246,23 @@ public:
                 break;
             }
             if constexpr (withCounts) count += counts[i];
+            if constexpr (Centred) {
+                const double step = static_cast<double>(z[i]) - previousZ;
+                previousZ = z[i];
+                forEachChannel<C>([&](int c) {
+                    const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
+                    twiceIntegral[c] += step * (previousV[c] + value);
+                    previousV[c] = value;
+                });
+                const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
+                noteBalance<C>(w, twiceIntegral, previousV, z[i], &v[i * C], vertexCount, band, segmentCount_ + count);
+            }
         }
-        forEachChannel<C>([&](int c) { window_[c] = w[c]; });
+        forEachChannel<C>([&](int c) {
+            window_[c] = w[c];
+            twiceIntegral_[c] = twiceIntegral[c];
+            inputV_[c] = previousV[c];
+        });
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
@@ -226,7 +272,7 @@ public:
     // stores at least one vertex when it must (its end depth, or counts).
     void finishLayer(bool recordEnd) {
         if (!started_) return;
-        if (open_) channels_ == 1 ? closeSegment<1>() : closeSegment<3>();
+        while (open_) channels_ == 1 ? closeSegment<1>() : closeSegment<3>();  // a replay may open one again
         if (!originStored_ && (recordEnd || originCount_ > 0)) storeOrigin();
         started_ = false;
     }
@@ -252,9 +298,15 @@ public:
         out_ = std::move(wide);
         for (int c = 1; c < 3; ++c) {
             originV_[c] = originV_[0];
+            inputV_[c] = inputV_[0];
+            twiceIntegral_[c] = twiceIntegral_[0];
             window_[c] = window_[0];
         }
         channels_ = 3;
+        // The vertices after the balanced point were the channels' mid-range:
+        // the segment closes where its window does.
+        balancedPoint_.valid = false;
+        pending_.clear();
     }
 
     VisibilityFunction take(int channels) {
@@ -263,6 +315,8 @@ public:
         out_ = VisibilityFunction(channels, result.hasCounts());
         started_ = false;
         open_ = false;
+        balancedPoint_.valid = false;
+        pending_.clear();
         return result;
     }
 
@@ -278,8 +332,12 @@ private:
             window_[c].num = Double2{v[c] + band - originV_[c], -(v[c] - band - originV_[c])};
             window_[c].den = Double2{dz, dz};
             window_[c].limitEnd(originV_[c]);
+            twiceIntegral_[c] = dz * (inputV_[c] + v[c]);
+            inputV_[c] = v[c];
         }
         open_ = true;
+        balancedPoint_.valid = false;
+        pending_.clear();
     }
 
     void addCount(std::uint64_t count) {
@@ -295,8 +353,10 @@ private:
     template <int C>
     void absorbAtOrigin(const double* v, std::uint64_t count, double band) {
         bool fits = true;
-        for (int c = 0; c < C; ++c)
+        for (int c = 0; c < C; ++c) {
+            inputV_[c] = v[c];  // the input at this depth from here on (right-continuous)
             if (std::abs(v[c] - originV_[c]) > band) fits = false;
+        }
         if (fits) {
             addCount(count);
             return;
@@ -327,45 +387,150 @@ private:
         originStored_ = true;
     }
 
-    // Emits the segment from the origin to the last accepted input depth with
-    // the midpoint slope, and makes its end the new origin.
+    // Whether a segment from the origin to depth z with this window and
+    // input integral can be balanced: some feasible slope s (the window's,
+    // kept from rising and from ending below 0) whose line's mean signed error
+    // against the input is within kBalance * band (twice the error times dz is
+    // 2 * origin * dz + s * dz^2 - twiceIntegral) and whose end is within as
+    // much of the input there (inputV).
     template <int C>
-    void closeSegment() {
+    bool balanced(const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z) const {
+        const double dz = static_cast<double>(z) - originZ_;
+        const double margin = kBalance * band_;
+        bool ok = true;
+        forEachChannel<C>([&](int c) {
+            const double o = originV_[c];
+            const double hi = std::min(w[c].hi(), 0.0);
+            const double lo = std::min(std::max(w[c].lo(), -o / dz), hi);
+            const double balancedSlope = (twiceIntegral[c] - 2.0 * o * dz) / (dz * dz);
+            const double spread = 2.0 * margin / dz;
+            const double lowest = std::max({lo, balancedSlope - spread, (inputV[c] - margin - o) / dz});
+            const double highest = std::min({hi, balancedSlope + spread, (inputV[c] + margin - o) / dz});
+            ok &= lowest <= highest;
+        });
+        return ok;
+    }
+
+    // After a vertex joins the open segment: a segment that can be balanced
+    // ending there keeps it as its balanced point; otherwise the vertex waits
+    // in pending_, to be taken again from the balanced point should the
+    // segment not be balanced when it closes.
+    template <int C, typename T>
+    void noteBalance(const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z, const T* v,
+                     std::uint32_t count, double band, std::uint64_t segmentCount) {
+        if (balanced<C>(w, twiceIntegral, inputV, z)) {
+            BalancedPoint& b = balancedPoint_;
+            b.valid = true;
+            b.z = z;
+            b.segmentCount = segmentCount;
+            forEachChannel<C>([&](int c) {
+                b.window[c] = w[c];
+                b.twiceIntegral[c] = twiceIntegral[c];
+                b.inputV[c] = inputV[c];
+            });
+            pending_.clear();
+        } else if (balancedPoint_.valid) {
+            PendingVertex p{z, {}, count, band};
+            forEachChannel<C>([&](int c) { p.v[c] = static_cast<double>(v[c]); });
+            pending_.push_back(p);
+        }
+    }
+
+    // The centred end slope within [lo, hi]: of the slopes whose mean error
+    // is within kBalance * band, the one that ends nearest the input (so that
+    // the next segment starts on it); without such a slope, the feasible one
+    // nearest the balanced slope.
+    double centredSlope(int c, double lo, double hi, double dz) const {
+        const double balancedSlope = (twiceIntegral_[c] - 2.0 * originV_[c] * dz) / (dz * dz);
+        const double spread = 2.0 * kBalance * band_ / dz;
+        const double lowest = std::max(lo, balancedSlope - spread), highest = std::min(hi, balancedSlope + spread);
+        if (lowest > highest) return std::clamp(balancedSlope, lo, hi);
+        return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
+    }
+
+    // Emits the segment from the origin to the last accepted input vertex and
+    // makes its end the new origin. Centred, a segment that cannot be
+    // balanced there but could at an earlier vertex (its balanced point) ends
+    // at that vertex instead, and the vertices after it are taken again:
+    // returns true then. Otherwise this is Lokovic & Veach's greedy segment
+    // with their midpoint slope.
+    //
+    // Why centred: the greedy rule extends a segment as far as some line stays
+    // within the band, so a segment along a plateau (behind a semi-transparent
+    // surface) takes in the first steps of the fall that ends it (the next
+    // surface), and its line tilts down along the whole plateau to reach them.
+    // Ending at the plateau's last balanced vertex keeps the plateau level and
+    // gives the fall its own segment.
+    template <int C>
+    bool closeSegment() {
+        const bool backtrack = balancedPoint_.valid && !pending_.empty();
+        if (backtrack) {
+            const BalancedPoint& b = balancedPoint_;
+            lastZ_ = b.z;
+            segmentCount_ = b.segmentCount;
+            for (int c = 0; c < C; ++c) {
+                window_[c] = b.window[c];
+                twiceIntegral_[c] = b.twiceIntegral[c];
+                inputV_[c] = b.inputV[c];
+            }
+        }
         const double dz = static_cast<double>(lastZ_) - originZ_;
         float end[kMaxChannels];
         bool flat = true;
         for (int c = 0; c < C; ++c) {
-            // Lokovic & Veach's midpoint rule, taken on the window the data
-            // itself defines and then moved into the feasible range. Clipping
-            // at V = 1 or at slope 0 first would bias the midpoint: flat runs
-            // (lit space, the plateau after a surface) would tilt by eps / 2.
+            // The window the data itself defines, then moved into the feasible
+            // range (no rising, no end below 0).
             const SlopeWindow& w = window_[c];
             const double hi = std::min(w.hi(), 0.0);
             const double lo = std::min(std::max(w.lo(), -originV_[c] / dz), hi);
-            const double slope = std::clamp(0.5 * (w.lo() + w.hi()), lo, hi);
+            const double slope = centred_ ? centredSlope(c, lo, hi, dz)
+                                          // Lokovic & Veach's midpoint, taken on the window the data
+                                          // defines: clipping at V = 1 or at slope 0 first would tilt
+                                          // flat runs (lit space) by eps / 2.
+                                          : std::clamp(0.5 * (w.lo() + w.hi()), lo, hi);
             const double ideal = originV_[c] + slope * dz;
             end[c] = std::clamp(static_cast<float>(ideal), 0.0f, static_cast<float>(originV_[c]));
             if (end[c] != static_cast<float>(originV_[c])) flat = false;
         }
         open_ = false;
+        balancedPoint_.valid = false;
         if (!originStored_ && flat) {
             // Still V = 1 throughout: slide the virtual origin forward.
             originZ_ = lastZ_;
             originCount_ += segmentCount_;
             segmentCount_ = 0;
-            return;
+        } else {
+            if (!originStored_) storeOrigin();
+            out_.append(lastZ_, end, 0);
+            out_.addToLastCount(segmentCount_);
+            segmentCount_ = 0;
+            originZ_ = lastZ_;
+            for (int c = 0; c < C; ++c) originV_[c] = end[c];
+            originStored_ = true;
+            originIsStep_ = false;
         }
-        if (!originStored_) storeOrigin();
-        out_.append(lastZ_, end, 0);
-        out_.addToLastCount(segmentCount_);
-        segmentCount_ = 0;
-        originZ_ = lastZ_;
-        for (int c = 0; c < C; ++c) originV_[c] = end[c];
-        originStored_ = true;
-        originIsStep_ = false;
+        if (!backtrack) {
+            pending_.clear();
+            return false;
+        }
+        std::vector<PendingVertex> replay = takeSpare();
+        replay.swap(pending_);
+        for (const PendingVertex& p : replay) push<C>(p.z, p.v, p.count, p.band);
+        replay.clear();
+        spare_.push_back(std::move(replay));
+        return true;
+    }
+
+    // An empty buffer for a replay, reusing the capacity of earlier ones.
+    std::vector<PendingVertex> takeSpare() {
+        if (spare_.empty()) return {};
+        std::vector<PendingVertex> b = std::move(spare_.back());
+        spare_.pop_back();
+        return b;
     }
 
     int channels_;
+    bool centred_;
     double band_;
     VisibilityFunction out_;
 
@@ -380,13 +545,28 @@ private:
     SlopeWindow window_[kMaxChannels] = {};
     float lastZ_ = 0.0f;
     std::uint64_t segmentCount_ = 0;
+    double inputV_[kMaxChannels] = {1.0, 1.0, 1.0};  // the input's value at lastZ_
+    double twiceIntegral_[kMaxChannels] = {};        // twice the input's integral from originZ_ to lastZ_
+
+    // The open segment's last vertex at which it could be closed balanced
+    // (noteBalance()), and the vertices it took after that one.
+    struct BalancedPoint {
+        bool valid = false;
+        float z = 0.0f;
+        std::uint64_t segmentCount = 0;
+        SlopeWindow window[kMaxChannels] = {};
+        double twiceIntegral[kMaxChannels] = {};
+        double inputV[kMaxChannels] = {};
+    } balancedPoint_;
+    std::vector<PendingVertex> pending_;
+    std::vector<std::vector<PendingVertex>> spare_;  // replay buffers, kept for their capacity
 };
 
 }  // namespace
 
 struct Compressor::Impl {
     explicit Impl(const CompressorOptions& o)
-        : options(o), grey(greyAtStart(o)), greedy(grey ? 1 : o.channels, o.tolerance, o.keepCounts) {
+        : options(o), grey(greyAtStart(o)), greedy(grey ? 1 : o.channels, o.tolerance, o.keepCounts, o.centred) {
         resetsLeft = std::max(o.maxLayers, 1) - 1;
     }
 

@@ -29,7 +29,7 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
 }
 
 VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
-                                    double tolerance, bool withCounts) {
+                                    double tolerance, bool withCounts, bool centred) {
     int channels = 1;
     bool anyVertices = false;
     for (const VisibilityView& c : children) {
@@ -54,6 +54,7 @@ VisibilityFunction averageFunctions(std::span<const VisibilityView> children, st
     }
     CompressorOptions options;
     options.tolerance = tolerance;
+    options.centred = centred;
     options.channels = channels;
     options.keepCounts = withCounts;
     Compressor compressor(options);

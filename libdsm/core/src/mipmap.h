@@ -18,6 +18,6 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
 /// sweep), compressed with `tolerance`; monochrome when the children allow it.
 /// Counts add up when `withCounts`. Empty when every child is empty.
 VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
-                                    double tolerance, bool withCounts);
+                                    double tolerance, bool withCounts, bool centred = false);
 
 DSM_NAMESPACE_END

@@ -116,7 +116,7 @@ FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& given, FarmGri
     // The defaults the scene gets (its area light's, say) are those of the
     // build, except the automatic tolerance, which stays "auto" as given.
     const BuildOptions options = resolvedBuildOptions(scene, given);
-    return {{"scene_sha256", sceneContentHash(scene)},
+    FarmBuildKey key{{"scene_sha256", sceneContentHash(scene)},
             {"width", std::to_string(*options.width)},
             {"height", std::to_string(*options.height)},
             {"spp", std::to_string(options.samplesPerPixel)},
@@ -135,6 +135,9 @@ FarmBuildKey farmBuildKey(const Scene& scene, const BuildOptions& given, FarmGri
             {"zstd_level", std::to_string(options.zstdLevel)},
             {"grid", concat(grid.columns, "x", grid.rows)},
             {"library", libraryVersion()}};
+    // Only when set, so that the keys of greedy builds stay as they were.
+    if (options.centredCompression) key.emplace_back("compression", "centred");
+    return key;
 }
 
 std::string farmPartPath(const std::string& directory, std::uint32_t index) {

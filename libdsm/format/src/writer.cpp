@@ -146,7 +146,7 @@ struct MapWriter::Impl {
                         }
                     }
                 p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)] =
-                    averageFunctions(block, weights, tolerance, options.counts);
+                    averageFunctions(block, weights, tolerance, options.counts, options.centredCompression);
             }
         }
     }

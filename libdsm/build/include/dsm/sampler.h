@@ -55,6 +55,11 @@ struct BuildOptions {
     /// error bound stays within 2 x tolerance; 1: smaller pyramids, the bound
     /// grows by one tolerance per level; docs/dsm-build.md measures both).
     double levelToleranceFactor = 0.5;
+    /// Centred compression (CompressorOptions::centred) at every level: plateaus
+    /// behind semi-transparent surfaces and ramps keep a mean signed error
+    /// within a tenth of the tolerance, for larger maps (docs/dsm-build.md,
+    /// "Centred compression"). Off: Lokovic & Veach's greedy rule.
+    bool centredCompression = false;
     std::uint32_t tileSize = 32;
     /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts);
     /// unset = 1, or for a scene with an area light 2.

@@ -30,6 +30,14 @@ struct CompressorOptions {
     /// For RGB input: store a monochrome function when the channels agree
     /// within the tolerance everywhere (Lokovic & Veach §5.2).
     bool allowMonochrome = true;
+    /// Centred segments: each segment's line is chosen, and where needed the
+    /// segment ended early, so that its signed error against the input
+    /// averages to at most a tenth of the tolerance, and its end lies within
+    /// that of the input. Lokovic & Veach's greedy rule (false) lets a segment
+    /// along a plateau tilt into the fall that follows it, so plateaus behind
+    /// semi-transparent surfaces read too dark on average. Costs larger maps
+    /// (docs/dsm-build.md measures both); the L-infinity bound is the same.
+    bool centred = false;
 };
 
 /// Streaming compressor: push() input vertices in z order (a VertexSink), then

@@ -35,6 +35,9 @@ struct WriterOptions {
     /// Each coarser level is recompressed with the previous tolerance times
     /// this factor (Lokovic & Veach §5.3 halve it: total error <= 2 epsilon).
     double levelToleranceFactor = 0.5;
+    /// Compress the coarser levels centred (CompressorOptions::centred), as
+    /// the level-0 functions given were.
+    bool centredCompression = false;
     /// The tiles' compressor (format 1.1 for zstd): zlib by default; zstd
     /// makes tiles 3-6 % larger and decompresses them several times faster.
     TileCodec codec = TileCodec::Zlib;
