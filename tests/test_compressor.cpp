@@ -721,3 +721,18 @@ TEST(CompressorCentred, PlateauBehindASurfaceStaysLevel) {
     EXPECT_LE(std::abs(centredPlateau), 0.1);
     EXPECT_LE(std::abs(centredFall), 0.1);
 }
+
+// Long inputs centred: a volume of 40,000 steps and a staircase of 20,000
+// steps stay within the bound (the vertices a segment may take again are
+// capped, kMostPending, so the work stays linear).
+TEST(CompressorCentred, LongInputsStayWithinTolerance) {
+    std::mt19937_64 rng(11);
+    for (const VisibilityFunction& f : {smoothVolume(40000, 40.0f), randomSteps(rng, 20000, 1)}) {
+        CompressorOptions o;
+        o.tolerance = 0.01;
+        o.centred = true;
+        const VisibilityFunction g = compressWith(f, o, true);
+        EXPECT_LE(maxError(f, g), 0.01 + kSlack);
+        expectValidOutput(f, g);
+    }
+}

@@ -24,6 +24,9 @@ constexpr double kStoreRounding = 0x1p-25;
 // A segment is balanced when a feasible line's signed error against the input
 // averages to at most this share of the band over the segment.
 constexpr double kBalance = 0.1;
+// The most vertices a centred segment takes past its balanced point and may
+// take again: each input vertex is then taken at most this many times more.
+constexpr std::size_t kMostPending = 256;
 
 // pushValid() checks its input only in debug builds.
 #ifdef NDEBUG
@@ -117,15 +120,15 @@ public:
     // One input vertex with target windows v[c] +- band (0 <= band <= window()).
     template <int C>
     void push(float z, const double* v, std::uint32_t count, double band) {
-        if (!started_) {
-            started_ = true;
-            originZ_ = z;
-            std::fill(originV_, originV_ + C, 1.0);
-            originStored_ = false;
-            originIsStep_ = false;
-        }
-        if (open_ && extendOne<C>(z, v, count, band)) return;
-        pushBeyond<C>(z, v, count, band);
+        pushOne<C>(z, v, count, band);
+        replay<C>();
+    }
+
+    // push() of a vertex that does not extend the open segment (if any).
+    template <int C>
+    void pushBeyond(float z, const double* v, std::uint32_t count, double band) {
+        pushBeyondOne<C>(z, v, count, band);
+        replay<C>();
     }
 
     // extendRun() of one vertex, inlined: the per-vertex push() path.
@@ -133,25 +136,6 @@ public:
     [[gnu::flatten]] bool extendOne(float z, const double* v, std::uint32_t count, double band) {
         return (centred_ ? extendRun<C, true, true>(&z, v, &count, 1, band)
                          : extendRun<C, true, false>(&z, v, &count, 1, band)) == 1;
-    }
-
-    // push() of a vertex that does not extend the open segment (if any).
-    template <int C>
-    void pushBeyond(float z, const double* v, std::uint32_t count, double band) {
-        if (open_ && closeSegment<C>()) {
-            // Closed at its balanced point and the vertices after it taken
-            // again: this one goes after them.
-            push<C>(z, v, count, band);
-            return;
-        }
-        if (z == originZ_) {
-            absorbAtOrigin<C>(v, count, band);
-            return;
-        }
-        open<C>(z, v, band);
-        lastZ_ = z;
-        segmentCount_ += count;
-        if (centred_) noteBalance<C>(window_, twiceIntegral_, inputV_, z, v, count, band, segmentCount_);
     }
 
     // Extends the open segment by the leading vertices of a run that fit it:
@@ -272,7 +256,15 @@ public:
     // stores at least one vertex when it must (its end depth, or counts).
     void finishLayer(bool recordEnd) {
         if (!started_) return;
-        while (open_) channels_ == 1 ? closeSegment<1>() : closeSegment<3>();  // a replay may open one again
+        while (open_) {  // a replay may open a segment again
+            if (channels_ == 1) {
+                closeSegment<1>();
+                replay<1>();
+            } else {
+                closeSegment<3>();
+                replay<3>();
+            }
+        }
         if (!originStored_ && (recordEnd || originCount_ > 0)) storeOrigin();
         started_ = false;
     }
@@ -317,10 +309,47 @@ public:
         open_ = false;
         balancedPoint_.valid = false;
         pending_.clear();
+        toReplay_.clear();
         return result;
     }
 
 private:
+    template <int C>
+    void pushOne(float z, const double* v, std::uint32_t count, double band) {
+        if (!started_) {
+            started_ = true;
+            originZ_ = z;
+            std::fill(originV_, originV_ + C, 1.0);
+            originStored_ = false;
+            originIsStep_ = false;
+        }
+        if (open_ && extendOne<C>(z, v, count, band)) return;
+        pushBeyondOne<C>(z, v, count, band);
+    }
+
+    template <int C>
+    void pushBeyondOne(float z, const double* v, std::uint32_t count, double band) {
+        if (open_) {
+            // A segment that closes at its balanced point hands the vertices
+            // after it back to be taken again (replay()): this one goes after
+            // them, so it waits beneath them.
+            if (backtracks()) {
+                PendingVertex p{z, {}, count, band};
+                std::copy(v, v + C, p.v);
+                toReplay_.push_back(p);
+            }
+            if (closeSegment<C>()) return;
+        }
+        if (z == originZ_) {
+            absorbAtOrigin<C>(v, count, band);
+            return;
+        }
+        open<C>(z, v, band);
+        lastZ_ = z;
+        segmentCount_ += count;
+        if (centred_) noteBalance<C>(window_, twiceIntegral_, inputV_, z, v, count, band, segmentCount_);
+    }
+
     // Opens a segment from the origin to its first vertex beyond the origin's
     // depth. Its window of feasible slopes is never empty: the origin is within
     // tolerance of the input there and the input never increases (rounding of
@@ -430,6 +459,14 @@ private:
             });
             pending_.clear();
         } else if (balancedPoint_.valid) {
+            if (pending_.size() == kMostPending) {
+                // Too far past it: the segment closes where its window does,
+                // so that taking vertices again stays within a bounded share
+                // of the work.
+                balancedPoint_.valid = false;
+                pending_.clear();
+                return;
+            }
             PendingVertex p{z, {}, count, band};
             forEachChannel<C>([&](int c) { p.v[c] = static_cast<double>(v[c]); });
             pending_.push_back(p);
@@ -463,7 +500,7 @@ private:
     // gives the fall its own segment.
     template <int C>
     bool closeSegment() {
-        const bool backtrack = balancedPoint_.valid && !pending_.empty();
+        const bool backtrack = backtracks();
         if (backtrack) {
             const BalancedPoint& b = balancedPoint_;
             lastZ_ = b.z;
@@ -509,24 +546,23 @@ private:
             originStored_ = true;
             originIsStep_ = false;
         }
-        if (!backtrack) {
-            pending_.clear();
-            return false;
-        }
-        std::vector<PendingVertex> replay = takeSpare();
-        replay.swap(pending_);
-        for (const PendingVertex& p : replay) push<C>(p.z, p.v, p.count, p.band);
-        replay.clear();
-        spare_.push_back(std::move(replay));
-        return true;
+        if (backtrack) toReplay_.insert(toReplay_.end(), pending_.rbegin(), pending_.rend());
+        pending_.clear();
+        return backtrack;
     }
 
-    // An empty buffer for a replay, reusing the capacity of earlier ones.
-    std::vector<PendingVertex> takeSpare() {
-        if (spare_.empty()) return {};
-        std::vector<PendingVertex> b = std::move(spare_.back());
-        spare_.pop_back();
-        return b;
+    bool backtracks() const { return balancedPoint_.valid && !pending_.empty(); }
+
+    // Takes the vertices handed back by closeSegment() again, in order, in a
+    // loop rather than by recursion: a replay that closes a segment early
+    // hands back vertices of its own, which go first.
+    template <int C>
+    void replay() {
+        while (!toReplay_.empty()) {
+            const PendingVertex p = toReplay_.back();
+            toReplay_.pop_back();
+            pushOne<C>(p.z, p.v, p.count, p.band);
+        }
     }
 
     int channels_;
@@ -559,7 +595,7 @@ private:
         double inputV[kMaxChannels] = {};
     } balancedPoint_;
     std::vector<PendingVertex> pending_;
-    std::vector<std::vector<PendingVertex>> spare_;  // replay buffers, kept for their capacity
+    std::vector<PendingVertex> toReplay_;  // vertices to take again, the next one last
 };
 
 }  // namespace
