@@ -26,7 +26,7 @@ constexpr double kStoreRounding = 0x1p-25;
 constexpr double kBalance = 0.1;
 // The most vertices a centred segment takes past its balanced point and may
 // take again: each input vertex is then taken at most this many times more.
-constexpr std::size_t kMostPending = 256;
+constexpr std::size_t kMostPending = 4096;
 
 // pushValid() checks its input only in debug builds.
 #ifdef NDEBUG
