@@ -481,48 +481,53 @@ TEST_F(CApi, AMapWrittenThroughTheCApiReadsBack) {
 }
 
 TEST_F(CApi, PixelsFromSampleRaysAreBuiltAsTheCppBuildDoes) {
-    const std::string out = (dir_ / "samples.dsm").string();
-    dsm_write_options o = DSM_WRITE_OPTIONS_INIT;
-    o.width = 6;
-    o.height = 5;
-    o.tile_size = 4;
-    o.channels = 3;
-    o.tolerance = 0.02;
-    dsm_writer* writer = nullptr;
-    ASSERT_EQ(dsm_writer_open(out.c_str(), &o, &writer), DSM_OK) << dsm_last_error_message();
-    std::mt19937_64 rng(4);
-    std::uniform_real_distribution<float> depth(1.0f, 5.0f), opacity(0.0f, 1.0f);
-    std::vector<dsm::VisibilityFunction> want;
-    for (uint32_t y = 0; y < 5; ++y)
-        for (uint32_t x = 0; x < 6; ++x) {
-            std::vector<std::vector<dsm_surface_hit>> hits(8);
-            std::vector<dsm_sample_ray> rays(8);
-            std::vector<std::vector<dsm::SurfaceHit>> cppHits(8);
-            std::vector<dsm::SampleRay> cppRays(8);
-            std::vector<double> weights(8);
-            for (std::size_t k = 0; k < 8; ++k) {
-                for (std::size_t h = 0; h < (k + x) % 4; ++h) {
-                    dsm_surface_hit hit{depth(rng), {opacity(rng), opacity(rng), opacity(rng)}};
-                    hits[k].push_back(hit);
-                    cppHits[k].push_back(dsm::SurfaceHit{hit.z, {hit.opacity[0], hit.opacity[1], hit.opacity[2]}});
+    for (const int32_t centred : {0, 1}) {
+        SCOPED_TRACE(centred ? "centred" : "greedy");
+        const std::string out = (dir_ / "samples.dsm").string();
+        dsm_write_options o = DSM_WRITE_OPTIONS_INIT;
+        o.centred_compression = centred;
+        o.width = 6;
+        o.height = 5;
+        o.tile_size = 4;
+        o.channels = 3;
+        o.tolerance = 0.02;
+        dsm_writer* writer = nullptr;
+        ASSERT_EQ(dsm_writer_open(out.c_str(), &o, &writer), DSM_OK) << dsm_last_error_message();
+        std::mt19937_64 rng(4);
+        std::uniform_real_distribution<float> depth(1.0f, 5.0f), opacity(0.0f, 1.0f);
+        std::vector<dsm::VisibilityFunction> want;
+        for (uint32_t y = 0; y < 5; ++y)
+            for (uint32_t x = 0; x < 6; ++x) {
+                std::vector<std::vector<dsm_surface_hit>> hits(8);
+                std::vector<dsm_sample_ray> rays(8);
+                std::vector<std::vector<dsm::SurfaceHit>> cppHits(8);
+                std::vector<dsm::SampleRay> cppRays(8);
+                std::vector<double> weights(8);
+                for (std::size_t k = 0; k < 8; ++k) {
+                    for (std::size_t h = 0; h < (k + x) % 4; ++h) {
+                        dsm_surface_hit hit{depth(rng), {opacity(rng), opacity(rng), opacity(rng)}};
+                        hits[k].push_back(hit);
+                        cppHits[k].push_back(dsm::SurfaceHit{hit.z, {hit.opacity[0], hit.opacity[1], hit.opacity[2]}});
+                    }
+                    weights[k] = 0.5 + 0.1 * double(k);
+                    rays[k] = dsm_sample_ray{hits[k].data(), hits[k].size(), weights[k]};
+                    cppRays[k].hits = cppHits[k];
                 }
-                weights[k] = 0.5 + 0.1 * double(k);
-                rays[k] = dsm_sample_ray{hits[k].data(), hits[k].size(), weights[k]};
-                cppRays[k].hits = cppHits[k];
+                ASSERT_EQ(dsm_writer_set_pixel_samples(writer, x, y, rays.data(), rays.size()), DSM_OK)
+                    << dsm_last_error_message();
+                dsm::CompressorOptions c;
+                c.tolerance = 0.02;
+                c.channels = 3;
+                c.centred = centred != 0;
+                want.push_back(dsm::buildVisibility(cppRays, weights, c));
             }
-            ASSERT_EQ(dsm_writer_set_pixel_samples(writer, x, y, rays.data(), rays.size()), DSM_OK)
-                << dsm_last_error_message();
-            dsm::CompressorOptions c;
-            c.tolerance = 0.02;
-            c.channels = 3;
-            want.push_back(dsm::buildVisibility(cppRays, weights, c));
-        }
-    ASSERT_EQ(dsm_writer_finish(writer), DSM_OK) << dsm_last_error_message();
-    dsm_writer_destroy(writer);
-    const auto map = dsm::DeepShadowMap::open(out);
-    for (uint32_t y = 0; y < 5; ++y)
-        for (uint32_t x = 0; x < 6; ++x)
-            EXPECT_TRUE(dsm::test::sameFunction(map->pixel(0, x, y).view(), want[y * 6 + x], false));
+        ASSERT_EQ(dsm_writer_finish(writer), DSM_OK) << dsm_last_error_message();
+        dsm_writer_destroy(writer);
+        const auto map = dsm::DeepShadowMap::open(out);
+        for (uint32_t y = 0; y < 5; ++y)
+            for (uint32_t x = 0; x < 6; ++x)
+                EXPECT_TRUE(dsm::test::sameFunction(map->pixel(0, x, y).view(), want[y * 6 + x], false));
+    }
 }
 
 TEST_F(CApi, AnUnfinishedWriterLeavesNoFile) {

@@ -109,6 +109,7 @@ dsm_result dsm_writer_open(const char* path, const dsm_write_options* options, d
         w.tolerance = o.tolerance;
         if (o.mip_levels != 0) w.mipLevels = o.mip_levels;  // 0: a full pyramid
         w.levelToleranceFactor = o.level_tolerance_factor;
+        w.centredCompression = o.centred_compression != 0;
         w.zlibLevel = o.zlib_level;
         w.metadata = o.metadata ? o.metadata : "{}";
         handle->writer = std::make_unique<dsm::MapWriter>(handle->path, w);
@@ -178,6 +179,7 @@ dsm_result dsm_writer_set_pixel_samples(dsm_writer* writer, uint32_t x, uint32_t
         compression.channels = writer->options.channels;
         compression.keepCounts = writer->options.counts;
         compression.maxLayers = writer->options.maxLayers;
+        compression.centred = writer->options.centredCompression;
         dsm::VisibilityFunction function;
         try {
             function = dsm::buildVisibility(sampleRays, weights, compression);

@@ -383,10 +383,15 @@ typedef struct dsm_write_options {
     double level_tolerance_factor;
     int32_t zlib_level; /**< 0..9 */
     const char* metadata; /**< JSON text stored in the file; NULL = "{}" */
+    /** Non-zero: compress pixels built from sample rays, and every coarser
+     *  level, with centred segments (docs/dsm-build.md, "Centred
+     *  compression"); 0: the greedy rule. Added in 0.1; older callers' smaller
+     *  structs read as 0. */
+    int32_t centred_compression;
 } dsm_write_options;
 #define DSM_WRITE_OPTIONS_INIT                                                                                       \
     {sizeof(dsm_write_options), 0, 0, 32, 1, 0, 1, DSM_PROJECTION_PERSPECTIVE,                                       \
-     {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, {-1, 1, -1, 1}, 0.0, DSM_FILTER_BOX, 1.0, 0.0, 0, 0.5, 6, NULL}
+     {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, {-1, 1, -1, 1}, 0.0, DSM_FILTER_BOX, 1.0, 0.0, 0, 0.5, 6, NULL, 0}
 
 /** A surface a sample ray met: light depth and opacity per channel in [0, 1] (a fixed record). */
 typedef struct dsm_surface_hit {
