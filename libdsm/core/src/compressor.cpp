@@ -83,10 +83,27 @@ struct SlopeWindow {
     // origin at V = origin: max(lo, -origin / dz) <= min(hi, 0).
     bool feasible(double origin, double dz) const { return consistent() & (-origin * den[0] <= num[0] * dz); }
 
+    // The feasible slopes [lo, hi] for a segment ending dz beyond an origin at
+    // V = origin: the window's, kept from rising and from ending below 0
+    // (lo > hi moved up to hi).
+    void feasibleSlopes(double origin, double dz, double& lo, double& hi) const {
+        hi = std::min(this->hi(), 0.0);
+        lo = std::min(std::max(this->lo(), -origin / dz), hi);
+    }
+
     void limitEnd(double origin) {
         const double limit = consistent() ? -origin * den[0] : std::numeric_limits<double>::infinity();
         endLimit = Double2{limit, limit};
     }
+};
+
+// An input vertex a centred segment took past its balanced point, kept to be
+// taken again.
+struct PendingVertex {
+    float z;
+    double v[kMaxChannels];
+    std::uint32_t count;
+    double band;
 };
 
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
@@ -95,13 +112,6 @@ struct SlopeWindow {
 // stored nothing (V = 1 is implicit before the first vertex). The channel
 // count (1 or 3) is a template argument of the per-vertex work, and a
 // 1-channel builder can be widened to 3 mid-stream (see widen()).
-struct PendingVertex {
-    float z;
-    double v[kMaxChannels];
-    std::uint32_t count;
-    double band;
-};
-
 class Greedy {
 public:
     Greedy(int channels, double tolerance, bool keepCounts, bool centred)
@@ -179,10 +189,11 @@ public:
         // the trapezoids' halves are left out), and its last vertex.
         double twiceIntegral[C], previousV[C];
         double previousZ = lastZ_;
-        forEachChannel<C>([&](int c) {
-            twiceIntegral[c] = twiceIntegral_[c];
-            previousV[c] = inputV_[c];
-        });
+        if constexpr (Centred)
+            forEachChannel<C>([&](int c) {
+                twiceIntegral[c] = twiceIntegral_[c];
+                previousV[c] = inputV_[c];
+            });
         std::uint64_t count = 0;
         std::size_t i = 0;
         for (; i < n; ++i) {
@@ -244,8 +255,10 @@ public:
         }
         forEachChannel<C>([&](int c) {
             window_[c] = w[c];
-            twiceIntegral_[c] = twiceIntegral[c];
-            inputV_[c] = previousV[c];
+            if constexpr (Centred) {
+                twiceIntegral_[c] = twiceIntegral[c];
+                inputV_[c] = previousV[c];
+            }
         });
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
@@ -361,8 +374,10 @@ private:
             window_[c].num = Double2{v[c] + band - originV_[c], -(v[c] - band - originV_[c])};
             window_[c].den = Double2{dz, dz};
             window_[c].limitEnd(originV_[c]);
-            twiceIntegral_[c] = dz * (inputV_[c] + v[c]);
-            inputV_[c] = v[c];
+            if (centred_) {
+                twiceIntegral_[c] = dz * (inputV_[c] + v[c]);
+                inputV_[c] = v[c];
+            }
         }
         open_ = true;
         balancedPoint_.valid = false;
@@ -381,11 +396,10 @@ private:
     // becomes (or replaces) a step vertex at that depth.
     template <int C>
     void absorbAtOrigin(const double* v, std::uint64_t count, double band) {
+        if (centred_) std::copy(v, v + C, inputV_);  // the input at this depth from here on (right-continuous)
         bool fits = true;
-        for (int c = 0; c < C; ++c) {
-            inputV_[c] = v[c];  // the input at this depth from here on (right-continuous)
+        for (int c = 0; c < C; ++c)
             if (std::abs(v[c] - originV_[c]) > band) fits = false;
-        }
         if (fits) {
             addCount(count);
             return;
@@ -417,11 +431,10 @@ private:
     }
 
     // Whether a segment from the origin to depth z with this window and
-    // input integral can be balanced: some feasible slope s (the window's,
-    // kept from rising and from ending below 0) whose line's mean signed error
-    // against the input is within kBalance * band (twice the error times dz is
-    // 2 * origin * dz + s * dz^2 - twiceIntegral) and whose end is within as
-    // much of the input there (inputV).
+    // input integral can be balanced: some feasible slope whose line's mean
+    // signed error against the input is within kBalance * band (a slope
+    // within 2 * kBalance * band / dz of the balanced one) and whose end is
+    // within as much of the input there (inputV).
     template <int C>
     bool balanced(const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z) const {
         const double dz = static_cast<double>(z) - originZ_;
@@ -429,12 +442,11 @@ private:
         bool ok = true;
         forEachChannel<C>([&](int c) {
             const double o = originV_[c];
-            const double hi = std::min(w[c].hi(), 0.0);
-            const double lo = std::min(std::max(w[c].lo(), -o / dz), hi);
-            const double balancedSlope = (twiceIntegral[c] - 2.0 * o * dz) / (dz * dz);
-            const double spread = 2.0 * margin / dz;
-            const double lowest = std::max({lo, balancedSlope - spread, (inputV[c] - margin - o) / dz});
-            const double highest = std::min({hi, balancedSlope + spread, (inputV[c] + margin - o) / dz});
+            double lo, hi;
+            w[c].feasibleSlopes(o, dz, lo, hi);
+            const double balanced = balancedSlope(c, twiceIntegral[c], dz), spread = 2.0 * margin / dz;
+            const double lowest = std::max({lo, balanced - spread, (inputV[c] - margin - o) / dz});
+            const double highest = std::min({hi, balanced + spread, (inputV[c] + margin - o) / dz});
             ok &= lowest <= highest;
         });
         return ok;
@@ -478,11 +490,17 @@ private:
     // the next segment starts on it); without such a slope, the feasible one
     // nearest the balanced slope.
     double centredSlope(int c, double lo, double hi, double dz) const {
-        const double balancedSlope = (twiceIntegral_[c] - 2.0 * originV_[c] * dz) / (dz * dz);
-        const double spread = 2.0 * kBalance * band_ / dz;
-        const double lowest = std::max(lo, balancedSlope - spread), highest = std::min(hi, balancedSlope + spread);
-        if (lowest > highest) return std::clamp(balancedSlope, lo, hi);
+        const double balanced = balancedSlope(c, twiceIntegral_[c], dz), spread = 2.0 * kBalance * band_ / dz;
+        const double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
+        if (lowest > highest) return std::clamp(balanced, lo, hi);
         return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
+    }
+
+    // The slope of the line from the origin whose signed error against the
+    // input (twice its integral over dz given) averages to zero: the line's
+    // integral is origin * dz + slope * dz^2 / 2.
+    double balancedSlope(int c, double twiceIntegral, double dz) const {
+        return (twiceIntegral - 2.0 * originV_[c] * dz) / (dz * dz);
     }
 
     // Emits the segment from the origin to the last accepted input vertex and
@@ -518,8 +536,8 @@ private:
             // The window the data itself defines, then moved into the feasible
             // range (no rising, no end below 0).
             const SlopeWindow& w = window_[c];
-            const double hi = std::min(w.hi(), 0.0);
-            const double lo = std::min(std::max(w.lo(), -originV_[c] / dz), hi);
+            double lo, hi;
+            w.feasibleSlopes(originV_[c], dz, lo, hi);
             const double slope = centred_ ? centredSlope(c, lo, hi, dz)
                                           // Lokovic & Veach's midpoint, taken on the window the data
                                           // defines: clipping at V = 1 or at slope 0 first would tilt
