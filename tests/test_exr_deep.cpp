@@ -21,7 +21,11 @@
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <random>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "temp_dir.h"
@@ -458,6 +462,57 @@ TEST(ExrFiles, ExportsAMipLevel) {
     eo.level = 99;
     EXPECT_THROW(exportDeepExr((dir / "map.dsm").string(), (dir / "x.exr").string(), eo), Error);
     EXPECT_FALSE(std::filesystem::exists(dir / "x.exr"));
+}
+
+// OpenEXR 3.1 accepts a deep tile whose sample-count table (width x height
+// x 4 bytes) fits 32 unsigned bits, then sizes the table through an int:
+// 32768 x 30000 tiles asked it for a negative, so nearly 2^64-byte, buffer.
+// A tile's area is bounded before OpenEXR reads the header.
+TEST(ExrFiles, TilesLargerThanTheLimitAreRefusedBeforeOpenExrReadsThem) {
+    test::TempDir dir;
+    writeTestMap(dir / "map.dsm", 1);
+    ExrExportOptions eo;
+    eo.tiled = true;
+    eo.tileSize = 16;
+    exportDeepExr((dir / "map.dsm").string(), (dir / "tiled.exr").string(), eo);
+    std::string bytes;
+    {
+        std::ifstream in(dir / "tiled.exr", std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    const std::string tag = std::string("tiles") + '\0' + "tiledesc" + '\0';
+    const std::size_t at = bytes.find(tag);
+    ASSERT_NE(at, std::string::npos);
+    const std::size_t sizes = at + tag.size() + 4;  // after the int32 attribute size
+    const auto patched = [&](std::uint32_t width, std::uint32_t height) {
+        std::string copy = bytes;
+        for (int i = 0; i < 4; ++i) {
+            copy[sizes + i] = char((width >> (8 * i)) & 0xff);
+            copy[sizes + 4 + i] = char((height >> (8 * i)) & 0xff);
+        }
+        const auto path = dir / "patched.exr";
+        std::ofstream(path, std::ios::binary) << copy;
+        return path;
+    };
+    for (const auto& [width, height] : {std::pair<std::uint32_t, std::uint32_t>{131072, 131072},
+                                        {32768, 30000}, {4097, 4096}, {1, 16777217},
+                                        {0xffffffffu, 0xffffffffu}}) {
+        const auto exr = patched(width, height);
+        try {
+            importDeepExr(exr.string(), (dir / "out.dsm").string());
+            ADD_FAILURE() << "no dsm::Error for " << width << " x " << height;
+        } catch (const Error& e) {
+            EXPECT_EQ(e.code(), ErrorCode::limit) << e.what();
+            EXPECT_NE(std::string(e.what()).find("header attribute 'tiles' (tiledesc) describes " +
+                                                 std::to_string(width) + " x " + std::to_string(height) +
+                                                 " pixel tiles; at most 16777216 pixels"),
+                      std::string::npos)
+                << e.what();
+        }
+        EXPECT_FALSE(std::filesystem::exists(dir / "out.dsm"));
+    }
+    // The unpatched file still imports.
+    EXPECT_EQ(importDeepExr(patched(16, 16).string(), (dir / "out.dsm").string()).width, kSize);
 }
 
 TEST(ExrFiles, FailedExportLeavesNoFile) {

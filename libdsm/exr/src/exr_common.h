@@ -18,6 +18,11 @@ namespace exr {
 /// Largest display or data window side, in pixels: the largest map.
 inline constexpr std::uint32_t kMaxExrExtent = 1u << 17;
 inline constexpr std::uint64_t kMaxSamplesPerPixel = 1u << 24;
+/// Most pixels in one tile of a tiled file. OpenEXR 3.1 accepts a deep
+/// tile whose sample-count table (width x height x 4 bytes) fits 32 unsigned
+/// bits but then sizes that table through an int, so tiles of 2^29 to 2^30
+/// pixels would ask it for a negative size.
+inline constexpr std::uint64_t kMaxExrTilePixels = 1u << 24;
 /// Most samples decoded at once (one read of tiles or scanlines).
 inline constexpr std::uint64_t kMaxSamplesPerBand = 1ull << 27;
 

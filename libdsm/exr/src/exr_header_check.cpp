@@ -86,7 +86,9 @@ std::string exrAttributeDisagreement(const std::string& type, const std::string&
 /// documented file layout. OpenEXR reads fixed-size types and channel lists
 /// by their content, not by the recorded size; an attribute whose content
 /// disagrees with its size is refused too, since OpenEXR would read the rest
-/// of the header out of step and meet sizes this walk never checked.
+/// of the header out of step and meet sizes this walk never checked. Tiles
+/// larger than kMaxExrTilePixels are refused before OpenEXR sizes a table
+/// for them.
 /// Anything else is left for OpenEXR to judge.
 }  // namespace
 
@@ -137,6 +139,16 @@ void exr::checkExrHeaderSizes(const std::string& path, std::uint64_t fileSize) {
         if (const std::uint32_t fixed = fixedExrAttributeSize(type); fixed != 0 && std::uint32_t(claimed) != fixed)
             throw Error(ErrorCode::corrupt,
                         concat(attribute, " records ", claimed, " bytes but a ", type, " holds ", fixed));
+        if (type == "tiledesc") {
+            // xSize, ySize (unsigned int32), then the level and rounding modes.
+            value.resize(std::size_t(claimed));
+            if (!in.read(value.data(), claimed)) return;
+            const std::uint64_t width = littleEndian32(value, 0), height = littleEndian32(value, 4);
+            if (width * height > kMaxExrTilePixels)
+                throw Error(ErrorCode::limit, concat(attribute, " describes ", width, " x ", height,
+                                                     " pixel tiles; at most ", kMaxExrTilePixels,
+                                                     " pixels in a tile are read"));
+        }
         if (type == "chlist" || type == "stringvector" || type == "floatvector" || type == "preview" ||
             type == "idmanifest") {
             value.resize(std::size_t(claimed));
