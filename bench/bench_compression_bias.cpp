@@ -16,7 +16,9 @@
 //   - the mean signed error over the ramps in front of the plateaus (the
 //     input falling through the occluders, a staircase of sample steps);
 //   - the largest error anywhere (at most 1: the stated bound);
-//   - level 0's vertices before and after compression, and the file's size
+//   - level 0's vertices before and after compression (and how many of the
+//     latter are vertical steps: at the depth of the vertex before), and the
+//     file's size
 //     (centred against greedy, in the same run).
 // The error is integrated exactly over each stretch (both functions are
 // linear between the depths where either has a vertex).
@@ -65,6 +67,7 @@ struct Sums {
     double receiverError = 0.0;  // the sum over pixels of the error just before the plateau's end
     std::size_t receiverPixels = 0;
     double largest = 0.0;
+    std::uint64_t verticalSteps = 0;  // compressed vertices at the depth of the one before
 };
 
 // Adds one pixel's comparison of `compressed` against `input` (layer 0,
@@ -75,6 +78,7 @@ struct Sums {
 void compare(const VisibilityView& input, const VisibilityView& compressed, Sums& sums) {
     const std::size_t n = input.lightEnd();
     if (n == 0) return;
+    for (std::size_t i = 1; i < compressed.lightEnd(); ++i) sums.verticalSteps += compressed.z(i) == compressed.z(i - 1);
     std::vector<double> depths;
     for (const VisibilityView* f : {&input, &compressed})
         for (std::size_t i = 0; i < f->lightEnd(); ++i) depths.push_back(f->z(i));
@@ -151,7 +155,7 @@ void measure(const NamedScene& s, std::uint32_t size, std::uint32_t spp, const f
         const std::uintmax_t bytes = fs::file_size(compressed);
         if (!centred) greedyBytes = bytes;
         std::printf("%-24s %-7s eps %.4f  plateau %+.3f (%zu pixels)  at its end %+.3f (%zu)  ramp %+.3f  largest "
-                    "|error| %.3f  vertices %llu -> %llu  file %llu bytes (%.3f x greedy)\n",
+                    "|error| %.3f  vertices %llu -> %llu (%llu vertical steps)  file %llu bytes (%.3f x greedy)\n",
                     s.name.c_str(), centred ? "centred" : "greedy", eps,
                     sums.plateauPixels ? sums.plateauError / double(sums.plateauPixels) / eps : 0.0,
                     sums.plateauPixels,
@@ -159,7 +163,7 @@ void measure(const NamedScene& s, std::uint32_t size, std::uint32_t spp, const f
                     sums.receiverPixels, sums.rampLength > 0.0 ? sums.rampError / sums.rampLength / eps : 0.0,
                     sums.largest / eps, static_cast<unsigned long long>(in->info().levels[0].vertexCount),
                     static_cast<unsigned long long>(out->info().levels[0].vertexCount),
-                    static_cast<unsigned long long>(bytes), double(bytes) / double(greedyBytes));
+                    static_cast<unsigned long long>(sums.verticalSteps), static_cast<unsigned long long>(bytes), double(bytes) / double(greedyBytes));
     }
     fs::remove(lossless);
     fs::remove(compressed);
