@@ -191,15 +191,17 @@ void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
         dsm::HiderSample sample;
         sample.x = rx;
         sample.y = ry;
-        frame.ray(rx, ry, sample.origin, sample.direction);
+        dsm::Vec3 origin, direction;
+        frame.ray(rx, ry, origin, direction);
         std::vector<dsm::RaySurfaceHit> exact;
-        surfaces.intersect(p, sample.origin, sample.direction, 0.0, camera.nearPlane, exact);
+        surfaces.intersect(p, origin, direction, 0.0, camera.nearPlane, exact);
         if (exact.empty()) continue;  // rounding put the ray just outside
         ++edgeCrossings;
-        std::vector<std::vector<dsm::RaySurfaceHit>> hits;
+        dsm::ScanlineHider::TileHits hits;
         hider.tileHits(px / kTile, py / kTile, {px, py, px + 1, py + 1}, 1, std::span(&sample, 1), camera.nearPlane,
                        hits);
-        const bool present = std::any_of(hits[0].begin(), hits[0].end(), [&](const dsm::RaySurfaceHit& h) {
+        const auto crossings = hits.of(0);
+        const bool present = std::any_of(crossings.begin(), crossings.end(), [&](const dsm::RaySurfaceHit& h) {
             return h.t == exact[0].t && h.object == exact[0].object;
         });
         ASSERT_TRUE(present) << "sample " << r << " at " << rx << ", " << ry;

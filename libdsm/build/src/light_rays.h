@@ -31,8 +31,17 @@ struct LightRayFrame {
 
     /// The ray through raster position (rx, ry).
     void ray(double rx, double ry, Vec3& o, Vec3& d) const {
-        const double sx = window[0] + rx / width * (window[1] - window[0]);
-        const double sy = window[3] - ry / height * (window[3] - window[2]);
+        double sx, sy;
+        screen(rx, ry, sx, sy);
+        rayAt(sx, sy, o, d);
+    }
+    /// Raster position (rx, ry) in screen units (the window's).
+    void screen(double rx, double ry, double& sx, double& sy) const {
+        sx = window[0] + rx / width * (window[1] - window[0]);
+        sy = window[3] - ry / height * (window[3] - window[2]);
+    }
+    /// The ray through screen position (sx, sy).
+    void rayAt(double sx, double sy, Vec3& o, Vec3& d) const {
         if (projection == Projection::Perspective) {
             o = origin;
             for (std::size_t i = 0; i < 3; ++i) d[i] = forward[i] + sx * right[i] + sy * up[i];

@@ -78,7 +78,7 @@ struct TileWorkspace {
     std::vector<SampleData> samples;  // of the tile's sample pixels, spp each
     std::vector<std::uint32_t> timeSlot, cell;
     std::vector<HiderSample> points;
-    std::vector<std::vector<RaySurfaceHit>> hits;
+    ScanlineHider::TileHits hits;
     std::vector<RaySurfaceHit> rayHits;
     std::vector<RayVolumeSample> volume;
     // Per sample: its transmittance, built (in `tau`) and prepared for the
@@ -300,7 +300,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             s.time = (timeSlot[k] + rng.uniform()) / spp;
         }
     };
-    auto addSurfaceHits = [&](const std::vector<RaySurfaceHit>& hits, SampleData& s) {
+    auto addSurfaceHits = [&](std::span<const RaySurfaceHit> hits, SampleData& s) {
         for (const RaySurfaceHit& h : hits) {
             const Rgb& opacity = scene.objects[h.object].opacity;
             s.hits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
@@ -330,16 +330,16 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             ws.points.resize(count);
             for (std::size_t i = 0; i < count; ++i) {
                 const SampleData& s = samples[i];
-                HiderSample& h = ws.points[i];
-                h.x = s.x;
-                h.y = s.y;
-                h.time = s.time;
-                frame.ray(s.x, s.y, h.origin, h.direction);
+                ws.points[i] = HiderSample{s.x, s.y, s.time};
             }
             hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, ws.hits);
             for (std::size_t i = 0; i < count; ++i) {
-                addSurfaceHits(ws.hits[i], samples[i]);
-                addVolumeSamples(ws.points[i].origin, ws.points[i].direction, samples[i], ws.volume);
+                addSurfaceHits(ws.hits.of(i), samples[i]);
+                if (caster.hasVolumes()) {
+                    Vec3 o, d;
+                    frame.ray(samples[i].x, samples[i].y, o, d);
+                    addVolumeSamples(o, d, samples[i], ws.volume);
+                }
             }
         } else {
             for (SampleData& s : samples) {

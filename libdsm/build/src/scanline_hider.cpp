@@ -1,10 +1,14 @@
 #include "scanline_hider.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstring>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+
+#include "double2.h"
 
 DSM_NAMESPACE_BEGIN
 
@@ -71,6 +75,58 @@ struct RasterStretch {
 
 }  // namespace
 
+// The samples among n <= 64 (raster positions xs, ys) that a primitive's
+// raster test lets through, bit j for sample j: for a still ribbon, those not
+// farther than its radius from its projected axis (which lies inside its
+// raster bounds), for any other primitive those inside its raster bounds.
+// Two samples at a time without a branch: the pixels a primitive's bounds
+// take in are whole, so most of their samples fail and the rest pass in no
+// order a predictor learns. The tail goes one sample at a time, with the same
+// operations. Both tests only let through more than cross; the exact
+// crossing decides.
+std::uint64_t ScanlineHider::rasterCandidates(const double* xs, const double* ys, std::size_t n,
+                                              const RasterBounds& b, const SegmentFootprint& f) {
+    using detail::Double2;
+    using detail::Mask2;
+    const auto splat = [](double v) { return Double2{v, v}; };
+    const Double2 bx0 = splat(b.x0), bx1 = splat(b.x1), by0 = splat(b.y0), by1 = splat(b.y1);
+    const bool ribbon = f.radius2 >= 0.0;
+    const Double2 fx0 = splat(f.x0), fy0 = splat(f.y0), fdx = splat(f.dx), fdy = splat(f.dy);
+    const Double2 inverse = splat(f.invLength2), radius2 = splat(f.radius2), zero = splat(0.0), one = splat(1.0);
+    std::uint64_t result = 0;
+    std::size_t j = 0;
+    for (; j + 2 <= n; j += 2) {
+        Double2 x, y;
+        std::memcpy(&x, xs + j, sizeof x);
+        std::memcpy(&y, ys + j, sizeof y);
+        Mask2 pass;
+        if (ribbon) {
+            const Double2 ex = x - fx0, ey = y - fy0;
+            Double2 along = (ex * fdx + ey * fdy) * inverse;
+            along = along < zero ? zero : along;
+            along = along > one ? one : along;
+            const Double2 gx = ex - along * fdx, gy = ey - along * fdy;
+            pass = ~(gx * gx + gy * gy > radius2);
+        } else {
+            pass = (x >= bx0) & (x <= bx1) & (y >= by0) & (y <= by1);
+        }
+        result |= static_cast<std::uint64_t>(detail::laneMask(pass)) << j;
+    }
+    for (; j < n; ++j) {
+        const double x = xs[j], y = ys[j];
+        if (ribbon) {
+            const double ex = x - f.x0, ey = y - f.y0;
+            const double along = std::clamp((ex * f.dx + ey * f.dy) * f.invLength2, 0.0, 1.0);
+            const double gx = ex - along * f.dx, gy = ey - along * f.dy;
+            if (gx * gx + gy * gy > f.radius2) continue;
+        } else if (x < b.x0 || x > b.x1 || y < b.y0 || y > b.y1) {
+            continue;
+        }
+        result |= std::uint64_t(1) << j;
+    }
+    return result;
+}
+
 // Narrows [x0, x1] to the pixels of row y (samples with y <= sample y < y + 1)
 // that a footprint reaches: those within `radius` of the part of the axis
 // whose y lies within `radius` of the row. False when it misses the row.
@@ -102,6 +158,7 @@ bool ScanlineHider::footprintRow(const SegmentFootprint& f, double radius, std::
 ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera& camera, std::uint32_t width,
                              std::uint32_t height, std::uint32_t tileSize, std::uint32_t reach)
     : surfaces_(surfaces),
+      frame_(detail::lightRayFrame(camera, width, height)),
       tilesX_((width + tileSize - 1) / tileSize),
       tilesY_((height + tileSize - 1) / tileSize) {
     const std::vector<Primitive>& primitives = surfaces.all();
@@ -203,12 +260,29 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
 
 void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels,
                              std::uint32_t spp, std::span<const HiderSample> samples, double tMin,
-                             std::vector<std::vector<RaySurfaceHit>>& hits) const {
-    if (hits.size() < samples.size()) hits.resize(samples.size());
-    for (std::size_t i = 0; i < samples.size(); ++i) hits[i].clear();
+                             TileHits& out) const {
+    out.found.clear();
+    out.foundSample.clear();
+    out.hits.clear();
+    out.start.assign(samples.size() + 1, 0);
     if (tx >= tilesX_ || ty >= tilesY_) return;
     const std::size_t tile = std::size_t(ty) * tilesX_ + tx;
     const std::uint32_t sw = pixels[2] - pixels[0];
+    // The samples' raster positions side by side, for rasterCandidates(), and
+    // their screen positions, from which a candidate's ray is quick to make.
+    std::vector<double>& xs = out.x;
+    std::vector<double>& ys = out.y;
+    std::vector<double>& sxs = out.screenX;
+    std::vector<double>& sys = out.screenY;
+    xs.resize(samples.size());
+    ys.resize(samples.size());
+    sxs.resize(samples.size());
+    sys.resize(samples.size());
+    for (std::size_t i = 0; i < samples.size(); ++i) {
+        xs[i] = samples[i].x;
+        ys[i] = samples[i].y;
+        frame_.screen(samples[i].x, samples[i].y, sxs[i], sys[i]);
+    }
     const std::vector<Primitive>& primitives = surfaces_.all();
     for (std::size_t e = bucketStart_[tile]; e < bucketStart_[tile + 1]; ++e) {
         const std::uint32_t index = bucketPrimitives_[e];
@@ -230,21 +304,28 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
             if (f.radius2 >= 0.0 && !footprintRow(f, radius, y, rowX0, rowX1)) continue;
             for (std::uint32_t x = rowX0; x <= rowX1; ++x) {
                 const std::size_t first = (std::size_t(y - pixels[1]) * sw + (x - pixels[0])) * spp;
-                for (std::size_t k = first; k < first + spp; ++k) {
-                    const HiderSample& s = samples[k];
-                    if (s.x < b.x0 || s.x > b.x1 || s.y < b.y0 || s.y > b.y1) continue;
-                    if (f.radius2 >= 0.0) {
-                        // Far from a still ribbon's projected axis: no crossing.
-                        const double ex = s.x - f.x0, ey = s.y - f.y0;
-                        const double along = std::clamp((ex * f.dx + ey * f.dy) * f.invLength2, 0.0, 1.0);
-                        const double gx = ex - along * f.dx, gy = ey - along * f.dy;
-                        if (gx * gx + gy * gy > f.radius2) continue;
+                for (std::size_t group = first; group < first + spp; group += 64) {
+                    const std::size_t n = std::min<std::size_t>(64, first + spp - group);
+                    for (std::uint64_t pass = rasterCandidates(&xs[group], &ys[group], n, b, f); pass != 0;
+                         pass &= pass - 1) {
+                        const std::size_t k = group + static_cast<std::size_t>(std::countr_zero(pass));
+                        Vec3 origin, direction;
+                        frame_.rayAt(sxs[k], sys[k], origin, direction);
+                        surfaces_.intersect(primitive, origin, direction, samples[k].time, tMin, out.found);
+                        out.foundSample.resize(out.found.size(), static_cast<std::uint32_t>(k));
                     }
-                    surfaces_.intersect(primitive, s.origin, s.direction, s.time, tMin, hits[k]);
                 }
             }
         }
     }
+    // Grouped by sample, each sample's in the order found (a counting sort).
+    for (const std::uint32_t sample : out.foundSample) ++out.start[sample + 1];
+    for (std::size_t i = 0; i < samples.size(); ++i) out.start[i + 1] += out.start[i];
+    out.hits.resize(out.found.size());
+    std::vector<std::size_t>& next = out.start;  // each sample's next slot, then moved back below
+    for (std::size_t f = 0; f < out.found.size(); ++f) out.hits[next[out.foundSample[f]]++] = out.found[f];
+    for (std::size_t i = samples.size(); i > 0; --i) next[i] = next[i - 1];
+    next[0] = 0;
 }
 
 DSM_NAMESPACE_END

@@ -6,10 +6,7 @@
 #include <utility>
 #include <vector>
 
-#ifdef __SSE2__
-#include <emmintrin.h>
-#endif
-
+#include "double2.h"
 #include "dsm/error.h"
 #include "text.h"
 
@@ -42,19 +39,9 @@ inline void forEachChannel(F&& f) {
     [&]<int... c>(std::integer_sequence<int, c...>) { (f(c), ...); }(std::make_integer_sequence<int, C>{});
 }
 
-// Two doubles in one SIMD register (SSE2 on x86-64, NEON on AArch64), and the
-// lane mask a comparison of two of them gives.
-using Double2 = double __attribute__((vector_size(16)));
-using Mask2 = std::int64_t __attribute__((vector_size(16)));
-
-// Bit l set when lane l of a comparison is true.
-inline int laneMask(Mask2 m) {
-#ifdef __SSE2__
-    return _mm_movemask_pd(reinterpret_cast<__m128d>(m));
-#else
-    return static_cast<int>((m[0] & 1) | (m[1] & 2));
-#endif
-}
+using detail::Double2;
+using detail::laneMask;
+using detail::Mask2;
 
 // A range of slopes lo <= m <= hi of lines from a segment origin, each bound a
 // numerator over a positive denominator (a depth difference), so that a new
