@@ -64,6 +64,23 @@ TEST(Samplers, EveryExampleGivesTheSameMapWithBothSamplers) {
     }
 }
 
+// The scanline sampler tests a pixel's samples against a primitive in
+// groups of 64, two at a time and the last one of an odd group alone: sample
+// counts of one, odd and above 64 take every path, still and moving hair, and
+// must find what rays cast one by one find.
+TEST(Samplers, SampleCountsOfEveryGroupShapeAgree) {
+    const TempDir dir;
+    for (const char* example : {"hairball", "motion"}) {
+        const dsm::Scene scene = dsm::loadScene(std::string(DSM_SOURCE_DIR "/examples/") + example + ".json");
+        for (const std::uint32_t spp : {1u, 3u, 67u}) {
+            dsm::BuildOptions options = smallBuild();
+            options.width = options.height = 24;
+            options.samplesPerPixel = spp;
+            expectBothSamplersAgree(scene, options, dir, std::string(example) + "-" + std::to_string(spp) + "spp");
+        }
+    }
+}
+
 TEST(Samplers, LayeredMapsWithCountsAgree) {
     const TempDir dir;
     const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/area-light.json");
