@@ -60,9 +60,10 @@ double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
     return 0.0;
 }
 
-// Everything one sample ray met.
+// Everything one sample ray met: its surface hits are
+// TileWorkspace::surfaceHits[firstHit, firstHit + hitCount).
 struct SampleData {
-    std::vector<SurfaceHit> hits;
+    std::size_t firstHit = 0, hitCount = 0;
     std::vector<VolumeSample> volume;
     double x = 0.0, y = 0.0;  // raster position
     double time = 0.0;        // in the shutter, [0, 1)
@@ -76,6 +77,13 @@ struct TileWorkspace {
     explicit TileWorkspace(const CompressorOptions& compression) : pixel(compression) {}
 
     std::vector<SampleData> samples;  // of the tile's sample pixels, spp each
+    // The samples' surface hits, one after the other in the samples' order:
+    // a pass over the samples (building their transmittances) reads them in
+    // turn instead of from a block of its own each.
+    std::vector<SurfaceHit> surfaceHits;
+    Span<const SurfaceHit> hitsOf(const SampleData& s) const {
+        return Span<const SurfaceHit>(surfaceHits.data() + s.firstHit, s.hitCount);
+    }
     std::vector<std::uint32_t> timeSlot, cell;
     std::vector<HiderSample> points;
     ScanlineHider::TileHits hits;
@@ -292,7 +300,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 std::swap(cell[k], cell[k + rng.next() % (cell.size() - k)]);
         for (std::uint32_t k = 0; k < spp; ++k) {
             SampleData& s = out[k];
-            s.hits.clear();
+            s.hitCount = 0;
             s.volume.clear();
             const std::uint32_t cx = cell[k] % gridX, cy = cell[k] / gridX;
             s.x = px + (cx + rng.uniform()) / gridX;
@@ -300,10 +308,14 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             s.time = (timeSlot[k] + rng.uniform()) / spp;
         }
     };
-    auto addSurfaceHits = [&](std::span<const RaySurfaceHit> hits, SampleData& s) {
+    // Called for the samples in their order: each one's hits follow the
+    // previous one's.
+    auto addSurfaceHits = [&](std::span<const RaySurfaceHit> hits, SampleData& s, TileWorkspace& ws) {
+        s.firstHit = ws.surfaceHits.size();
+        s.hitCount = hits.size();
         for (const RaySurfaceHit& h : hits) {
             const Rgb& opacity = scene.objects[h.object].opacity;
-            s.hits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
+            ws.surfaceHits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
         }
     };
     auto addVolumeSamples = [&](const Vec3& o, const Vec3& d, SampleData& s, std::vector<RayVolumeSample>& volume) {
@@ -323,6 +335,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
         const std::size_t count = std::size_t(sw) * (pixels[3] - pixels[1]) * spp;
         if (ws.samples.size() < count) ws.samples.resize(count);
         const std::span<SampleData> samples(ws.samples.data(), count);
+        ws.surfaceHits.clear();
         for (std::uint32_t y = pixels[1]; y < pixels[3]; ++y)
             for (std::uint32_t x = pixels[0]; x < pixels[2]; ++x)
                 placeSamples(x, y, &samples[(std::size_t(y - pixels[1]) * sw + (x - pixels[0])) * spp], ws);
@@ -334,7 +347,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             }
             hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, ws.hits);
             for (std::size_t i = 0; i < count; ++i) {
-                addSurfaceHits(ws.hits.of(i), samples[i]);
+                addSurfaceHits(ws.hits.of(i), samples[i], ws);
                 if (caster.hasVolumes()) {
                     Vec3 o, d;
                     frame.ray(samples[i].x, samples[i].y, o, d);
@@ -347,7 +360,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 frame.ray(s.x, s.y, o, d);
                 ws.rayHits.clear();
                 caster.surfaceHits(o, d, s.time, camera.nearPlane, ws.rayHits);
-                addSurfaceHits(ws.rayHits, s);
+                addSurfaceHits(ws.rayHits, s, ws);
                 addVolumeSamples(o, d, s, ws.volume);
             }
         }
@@ -387,10 +400,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             for (std::uint32_t y = by0; y < by1; ++y)
                 for (std::uint32_t x = rx0; x < rx1; ++x) {
                     const auto s = samples.subspan((std::size_t(y - sy0) * sw + (x - sx0)) * spp, spp);
-                    for (const SampleData& d : s) stats.rawVertices += 2 * d.hits.size() + d.volume.size();
+                    for (const SampleData& d : s) stats.rawVertices += 2 * d.hitCount + d.volume.size();
                     if (options.sampleRays) {
                         ws.rays.clear();
-                        for (const SampleData& d : s) ws.rays.push_back({d.hits, d.volume});
+                        for (const SampleData& d : s) ws.rays.push_back({ws.hitsOf(d), d.volume});
                         options.sampleRays(x, y, ws.rays);
                     }
                 }
@@ -412,7 +425,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                                 const SampleData& s = samples[i];
                                 const double wgt = filterWeight(filter, radius, s.x - cx, s.y - cy);
                                 if (wgt <= 0.0) continue;
-                                const SampleRay ray{s.hits, s.volume};
+                                const SampleRay ray{ws.hitsOf(s), s.volume};
                                 if (!ws.built[i]) {
                                     try {
                                         ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.tau);
