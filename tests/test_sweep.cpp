@@ -371,6 +371,51 @@ TEST(Sweep, ReusedSweeperMatchesFreshSweeps) {
     }
 }
 
+// Small inputs keep their depths inside the SweepInput, larger ones on the
+// heap: inputs moved after assign() (a vector that grows, a move-assignment
+// over an input of the other kind) still sweep as the functions do.
+TEST(Sweep, PreparedInputsSurviveMoves) {
+    std::mt19937_64 rng(43);
+    for (const int channels : {1, 3}) {
+        std::vector<VisibilityFunction> inputs;
+        std::vector<double> weights;
+        for (std::size_t k = 0; k < 40; ++k) {
+            // 0 to 9 vertices: both sides of SweepInput::kInlineDepths.
+            inputs.push_back(dsm::test::randomMonotone(rng, k % 10, channels, true));
+            weights.push_back(0.5 + static_cast<double>(k % 3));
+        }
+        const RecordingSink fresh = runSweep(inputs, weights, channels);
+        std::vector<dsm::SweepInput> prepared(1);
+        for (std::size_t k = 0; k < inputs.size(); ++k) {
+            if (k > 0) prepared.emplace_back();  // grows, moving those assigned so far
+            prepared[k].assign(inputs[k]);
+        }
+        // Each swapped with its mirror by move-assignments, then swapped back.
+        const std::size_t n = prepared.size();
+        for (int pass = 0; pass < 2; ++pass)
+            for (std::size_t k = 0; k < n / 2; ++k) {
+                dsm::SweepInput held = std::move(prepared[k]);
+                prepared[k] = std::move(prepared[n - 1 - k]);
+                prepared[n - 1 - k] = std::move(held);
+            }
+        std::vector<dsm::SweepInput> moved;
+        for (std::size_t k = n; k-- > 0;) moved.push_back(std::move(prepared[k]));
+        std::reverse(moved.begin(), moved.end());
+        std::vector<const dsm::SweepInput*> pointers;
+        for (const dsm::SweepInput& p : moved) pointers.push_back(&p);
+        RecordingSink out;
+        out.channels = channels;
+        dsm::Sweeper sweeper;
+        EXPECT_FALSE(sweeper.sweep(std::span<const dsm::SweepInput* const>(pointers), weights, channels, out));
+        ASSERT_EQ(out.vertices.size(), fresh.vertices.size());
+        for (std::size_t i = 0; i < fresh.vertices.size(); ++i) {
+            EXPECT_EQ(out.vertices[i].z, fresh.vertices[i].z);
+            EXPECT_EQ(out.vertices[i].v, fresh.vertices[i].v);
+            EXPECT_EQ(out.vertices[i].count, fresh.vertices[i].count);
+        }
+    }
+}
+
 TEST(Sweep, PreparedInputsAreChecked) {
     VisibilityFunction layered = simple();
     layered.beginLayer();

@@ -4,6 +4,8 @@
 #include <bit>
 #include <cmath>
 #include <functional>
+#include <iterator>
+#include <utility>
 #include <vector>
 
 #include "dsm/error.h"
@@ -58,6 +60,30 @@ constexpr double kCancellationLimit = 1e6;
 
 }  // namespace
 
+SweepInput::SweepInput(SweepInput&& other) noexcept { *this = std::move(other); }
+
+SweepInput& SweepInput::operator=(SweepInput&& other) noexcept {
+    if (this == &other) return *this;
+    // The heap arrays move; what lies inside the object is copied, and each
+    // pointer follows its data.
+    const bool stepsInside = other.stepData_ == other.inlineSteps_;
+    const bool numbersInside = other.numberData_ == other.inlineNumbers_;
+    std::copy(std::begin(other.inlineSteps_), std::end(other.inlineSteps_), inlineSteps_);
+    std::copy(std::begin(other.inlineNumbers_), std::end(other.inlineNumbers_), inlineNumbers_);
+    steps_ = std::move(other.steps_);
+    numbers_ = std::move(other.numbers_);
+    stepCapacity_ = std::exchange(other.stepCapacity_, 0);
+    numberCapacity_ = std::exchange(other.numberCapacity_, 0);
+    size_ = std::exchange(other.size_, 0);
+    vertices_ = std::exchange(other.vertices_, 0);
+    channels_ = other.channels_;
+    stepData_ = stepsInside ? inlineSteps_ : steps_.get();
+    numberData_ = numbersInside ? inlineNumbers_ : numbers_.get();
+    other.stepData_ = other.inlineSteps_;
+    other.numberData_ = other.inlineNumbers_;
+    return *this;
+}
+
 void SweepInput::assign(const VisibilityView& f) {
     if (f.channels() != 1 && f.channels() != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: an input has ", f.channels(), " channels, not 1 or 3"));
@@ -72,13 +98,23 @@ void SweepInput::assign(const VisibilityView& f) {
     std::size_t depths = 0;
     for (std::size_t i = 0; i < z.size(); ++i) depths += i == 0 || z[i] != z[i - 1];
     const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels_);
-    if (stepCapacity_ < depths) {
-        stepCapacity_ = std::max(depths, 2 * stepCapacity_);
-        steps_ = std::make_unique_for_overwrite<Step[]>(stepCapacity_);
+    if (depths <= kInlineDepths) {
+        stepData_ = inlineSteps_;
+    } else {
+        if (stepCapacity_ < depths) {
+            stepCapacity_ = std::max(depths, 2 * stepCapacity_);
+            steps_ = std::make_unique_for_overwrite<Step[]>(stepCapacity_);
+        }
+        stepData_ = steps_.get();
     }
-    if (numberCapacity_ < numbers) {
-        numberCapacity_ = std::max(numbers, 2 * numberCapacity_);
-        numbers_ = std::make_unique_for_overwrite<double[]>(numberCapacity_);
+    if (numbers <= 2 * kInlineDepths) {
+        numberData_ = inlineNumbers_;
+    } else {
+        if (numberCapacity_ < numbers) {
+            numberCapacity_ = std::max(numbers, 2 * numberCapacity_);
+            numbers_ = std::make_unique_for_overwrite<double[]>(numberCapacity_);
+        }
+        numberData_ = numbers_.get();
     }
     size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
 }
@@ -89,8 +125,8 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
     const float* z = f.depths().data();
     const float* v = f.allValues().data();
     const std::uint32_t* counts = f.hasCounts() ? f.counts().data() : nullptr;
-    Step* out = steps_.get();
-    double* numbers = numbers_.get();
+    Step* out = stepData_;
+    double* numbers = numberData_;
     // The input's state after the depths read so far, as the sweep sees it.
     bool atZero[NC] = {};
     bool sloping = false;

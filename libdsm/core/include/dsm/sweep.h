@@ -44,9 +44,21 @@ DSM_API std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<c
 /// (a sample inside the filters of several) is thus read, and its slopes
 /// divided out, once instead of once per pixel; sweeping it gives exactly
 /// (the same doubles) what sweeping the function gives. Keeps its storage
-/// from one assign() to the next.
+/// from one assign() to the next. An input of up to kInlineDepths depths
+/// (mono; one for RGB) keeps them inside the object, so that inputs held side
+/// by side (a tile's samples) are read by the sweep in turn.
+/// Not copyable; moving keeps what was assigned.
 class DSM_API SweepInput {
 public:
+    /// Depths of a mono input kept inside the object.
+    static constexpr std::size_t kInlineDepths = 3;
+
+    SweepInput() = default;
+    SweepInput(SweepInput&& other) noexcept;
+    SweepInput& operator=(SweepInput&& other) noexcept;
+    SweepInput(const SweepInput&) = delete;
+    SweepInput& operator=(const SweepInput&) = delete;
+
     /// What the sweep meets at one depth of the input.
     struct Step {
         float z;
@@ -71,16 +83,23 @@ public:
     /// Its distinct depths (in storage order, equal neighbours grouped).
     std::size_t size() const { return size_; }
     bool empty() const { return size_ == 0; }
-    const Step& step(std::size_t i) const { return steps_[i]; }
+    const Step& step(std::size_t i) const { return stepData_[i]; }
     /// At depth i, per channel: the change of value (the step's height), then
     /// the slope after it, each `channels()` doubles.
-    const double* changes(std::size_t i) const { return numbers_.get() + i * 2 * static_cast<std::size_t>(channels_); }
+    const double* changes(std::size_t i) const { return numberData_ + i * 2 * static_cast<std::size_t>(channels_); }
 
 private:
     template <std::size_t NC>
     std::size_t assignWith(const VisibilityView& f);
 
-    // Grown (never shrunk, never initialised) to the largest input seen.
+    // Where the steps and numbers are: inside the object (inlineSteps_,
+    // inlineNumbers_) or in the heap arrays.
+    Step* stepData_ = inlineSteps_;
+    double* numberData_ = inlineNumbers_;
+    Step inlineSteps_[kInlineDepths];
+    double inlineNumbers_[2 * kInlineDepths];
+    // Grown (never shrunk, never initialised) to the largest input seen that
+    // does not fit inside.
     std::unique_ptr<Step[]> steps_;
     std::unique_ptr<double[]> numbers_;
     std::size_t stepCapacity_ = 0;
