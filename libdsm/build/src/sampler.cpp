@@ -318,8 +318,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             ws.surfaceHits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
         }
     };
-    auto addVolumeSamples = [&](const Vec3& o, const Vec3& d, SampleData& s, std::vector<RayVolumeSample>& volume) {
+    auto addVolumeSamples = [&](SampleData& s, std::vector<RayVolumeSample>& volume) {
         if (!caster.hasVolumes()) return;
+        Vec3 o, d;
+        frame.ray(s.x, s.y, o, d);
         volume.clear();
         caster.volumeSamples(o, d, s.time, camera.nearPlane, volume);
         for (const RayVolumeSample& v : volume) s.volume.push_back({static_cast<float>(v.t), static_cast<float>(v.extinction)});
@@ -348,11 +350,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, ws.hits);
             for (std::size_t i = 0; i < count; ++i) {
                 addSurfaceHits(ws.hits.of(i), samples[i], ws);
-                if (caster.hasVolumes()) {
-                    Vec3 o, d;
-                    frame.ray(samples[i].x, samples[i].y, o, d);
-                    addVolumeSamples(o, d, samples[i], ws.volume);
-                }
+                addVolumeSamples(samples[i], ws.volume);
             }
         } else {
             for (SampleData& s : samples) {
@@ -361,7 +359,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 ws.rayHits.clear();
                 caster.surfaceHits(o, d, s.time, camera.nearPlane, ws.rayHits);
                 addSurfaceHits(ws.rayHits, s, ws);
-                addVolumeSamples(o, d, s, ws.volume);
+                addVolumeSamples(s, ws.volume);
             }
         }
         stats.samples += count;

@@ -81,9 +81,9 @@ struct RasterStretch {
 // raster bounds), for any other primitive those inside its raster bounds.
 // Two samples at a time without a branch: the pixels a primitive's bounds
 // take in are whole, so most of their samples fail and the rest pass in no
-// order a predictor learns. The tail goes one sample at a time, with the same
-// operations. Both tests only let through more than cross; the exact
-// crossing decides.
+// order a predictor learns. An odd n reads one position past them (xs and ys
+// hold one more), whose bit is dropped. Both tests only let through more
+// than cross; the exact crossing decides.
 std::uint64_t ScanlineHider::rasterCandidates(const double* xs, const double* ys, std::size_t n,
                                               const RasterBounds& b, const SegmentFootprint& f) {
     using detail::Double2;
@@ -94,8 +94,7 @@ std::uint64_t ScanlineHider::rasterCandidates(const double* xs, const double* ys
     const Double2 fx0 = splat(f.x0), fy0 = splat(f.y0), fdx = splat(f.dx), fdy = splat(f.dy);
     const Double2 inverse = splat(f.invLength2), radius2 = splat(f.radius2), zero = splat(0.0), one = splat(1.0);
     std::uint64_t result = 0;
-    std::size_t j = 0;
-    for (; j + 2 <= n; j += 2) {
+    for (std::size_t j = 0; j < n; j += 2) {
         Double2 x, y;
         std::memcpy(&x, xs + j, sizeof x);
         std::memcpy(&y, ys + j, sizeof y);
@@ -112,19 +111,7 @@ std::uint64_t ScanlineHider::rasterCandidates(const double* xs, const double* ys
         }
         result |= static_cast<std::uint64_t>(detail::laneMask(pass)) << j;
     }
-    for (; j < n; ++j) {
-        const double x = xs[j], y = ys[j];
-        if (ribbon) {
-            const double ex = x - f.x0, ey = y - f.y0;
-            const double along = std::clamp((ex * f.dx + ey * f.dy) * f.invLength2, 0.0, 1.0);
-            const double gx = ex - along * f.dx, gy = ey - along * f.dy;
-            if (gx * gx + gy * gy > f.radius2) continue;
-        } else if (x < b.x0 || x > b.x1 || y < b.y0 || y > b.y1) {
-            continue;
-        }
-        result |= std::uint64_t(1) << j;
-    }
-    return result;
+    return n == 64 ? result : result & ((std::uint64_t(1) << n) - 1);
 }
 
 // Narrows [x0, x1] to the pixels of row y (samples with y <= sample y < y + 1)
@@ -268,14 +255,15 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     if (tx >= tilesX_ || ty >= tilesY_) return;
     const std::size_t tile = std::size_t(ty) * tilesX_ + tx;
     const std::uint32_t sw = pixels[2] - pixels[0];
-    // The samples' raster positions side by side, for rasterCandidates(), and
-    // their screen positions, from which a candidate's ray is quick to make.
+    // The samples' raster positions side by side, for rasterCandidates() (one
+    // more, for an odd group's last pair), and their screen positions, from
+    // which a candidate's ray is quick to make.
     std::vector<double>& xs = out.x;
     std::vector<double>& ys = out.y;
     std::vector<double>& sxs = out.screenX;
     std::vector<double>& sys = out.screenY;
-    xs.resize(samples.size());
-    ys.resize(samples.size());
+    xs.assign(samples.size() + 1, 0.0);
+    ys.assign(samples.size() + 1, 0.0);
     sxs.resize(samples.size());
     sys.resize(samples.size());
     for (std::size_t i = 0; i < samples.size(); ++i) {

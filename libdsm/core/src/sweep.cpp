@@ -5,6 +5,7 @@
 #include <cmath>
 #include <functional>
 #include <iterator>
+#include <memory>
 #include <utility>
 #include <vector>
 
@@ -58,6 +59,19 @@ void replaceTop(std::uint64_t* heap, std::size_t n, std::uint64_t moving) {
 // removed again, perhaps long ago), recompute it exactly.
 constexpr double kCancellationLimit = 1e6;
 
+// Where `needed` items go: `inside` (room for `room`) when they fit, else
+// `heap`, grown by doubling: a worker's inputs soon have room for every
+// input they see, and hold little more.
+template <class T>
+T* storageFor(std::size_t needed, T* inside, std::size_t room, std::unique_ptr<T[]>& heap, std::size_t& capacity) {
+    if (needed <= room) return inside;
+    if (capacity < needed) {
+        capacity = std::max(needed, 2 * capacity);
+        heap = std::make_unique_for_overwrite<T[]>(capacity);
+    }
+    return heap.get();
+}
+
 }  // namespace
 
 SweepInput::SweepInput(SweepInput&& other) noexcept { *this = std::move(other); }
@@ -92,30 +106,13 @@ void SweepInput::assign(const VisibilityView& f) {
                                                         " layers; the sweep averages single-layer functions"));
     channels_ = f.channels();
     vertices_ = f.size();
-    // Room for its distinct depths, grown by doubling: a worker's inputs soon
-    // have room for every input they see, and hold little more.
+    // Room for its distinct depths (storageFor()).
     const Span<const float> z = f.depths();
     std::size_t depths = 0;
     for (std::size_t i = 0; i < z.size(); ++i) depths += i == 0 || z[i] != z[i - 1];
     const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels_);
-    if (depths <= kInlineDepths) {
-        stepData_ = inlineSteps_;
-    } else {
-        if (stepCapacity_ < depths) {
-            stepCapacity_ = std::max(depths, 2 * stepCapacity_);
-            steps_ = std::make_unique_for_overwrite<Step[]>(stepCapacity_);
-        }
-        stepData_ = steps_.get();
-    }
-    if (numbers <= 2 * kInlineDepths) {
-        numberData_ = inlineNumbers_;
-    } else {
-        if (numberCapacity_ < numbers) {
-            numberCapacity_ = std::max(numbers, 2 * numberCapacity_);
-            numbers_ = std::make_unique_for_overwrite<double[]>(numberCapacity_);
-        }
-        numberData_ = numbers_.get();
-    }
+    stepData_ = storageFor(depths, inlineSteps_, kInlineDepths, steps_, stepCapacity_);
+    numberData_ = storageFor(numbers, inlineNumbers_, 2 * kInlineDepths, numbers_, numberCapacity_);
     size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
 }
 
