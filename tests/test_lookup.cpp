@@ -673,6 +673,50 @@ TEST(LookupSpace, WorldAndLightAgreeWithRasterForBothProjections) {
     }
 }
 
+// A file may hold any finite camera, and a finite point may then land beyond
+// double range in light space: such a point is outside the map, lit, and no
+// lookup throws for it. Only a point the caller passes non-finite is an
+// argument error.
+TEST(LookupSpace, FinitePointsThatAnExtremeCameraCarriesBeyondDoubleRangeAreLit) {
+    for (dsm::Projection projection : {dsm::Projection::Perspective, dsm::Projection::Orthographic}) {
+        SCOPED_TRACE(projection == dsm::Projection::Perspective ? "perspective" : "orthographic");
+        WriterOptions o;
+        o.tileSize = 8;
+        o.channels = 1;
+        o.tolerance = 0.001;
+        o.camera = rigidCamera(projection, 0.0, 0.0, {0.0, 0.0, 1.0}, {-1.0, 1.0, -1.0, 1.0});
+        o.camera.worldToLight[1] = -1.6e264;  // x depends on y, enormously
+        o.camera.worldToLight[10] = 1e308;    // and depth on z
+        const auto m = writeAndOpen(smoothImage(16, 16, 1), o);
+        LookupContext ctx(m->map);
+        LookupOptions wide;
+        wide.filter = PixelFilter::Gaussian;
+        wide.filterWidth = 3.0;
+        for (const std::array<double, 3>& p : std::vector<std::array<double, 3>>{
+                 {0.1, 1e100, 1.5}, {0.0, 1e200, 0.5}, {0.0, 0.0, 10.0}, {0.0, 0.0, -10.0}}) {
+            for (const LookupOptions& lo : {LookupOptions{}, wide}) {
+                LookupResult r;
+                ASSERT_NO_THROW(r = ctx.world(p, lo)) << p[0] << "," << p[1] << "," << p[2];
+                EXPECT_EQ(r.v, (std::array<double, 3>{1.0, 1.0, 1.0}));
+                EXPECT_EQ(r.pixelsUsed, 0);
+            }
+        }
+        // The camera itself still works for ordinary points: inside, shadowed.
+        EXPECT_LT(ctx.world({0.0, 0.0, 0.5e-308}, atTheDepth()).v[0], 1.0);
+        for (const std::array<double, 3>& bad : std::vector<std::array<double, 3>>{
+                 {std::nan(""), 0.0, 1.0}, {0.0, HUGE_VAL, 1.0}, {0.0, 0.0, -HUGE_VAL}}) {
+            try {
+                (void)ctx.world(bad);
+                ADD_FAILURE() << "a non-finite world point was looked up";
+            } catch (const dsm::Error& e) {
+                EXPECT_EQ(e.code(), dsm::ErrorCode::argument);
+                EXPECT_NE(std::string(e.what()).find("world-space point"), std::string::npos) << e.what();
+            }
+            EXPECT_THROW((void)ctx.light(bad), dsm::Error);
+        }
+    }
+}
+
 TEST(LookupBias, BiasShiftsTheQueryDepth) {
     const auto m = smoothMonoMap();
     LookupContext ctx(m->map);

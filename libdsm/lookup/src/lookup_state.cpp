@@ -143,7 +143,9 @@ bool isBilinear(PixelFilter filter, double width) {
 }
 
 // Raster position and depth of a point; false when it is lit without a
-// lookup (behind a perspective light). Throws for a non-finite point.
+// lookup: behind a perspective light, or so far out that the light camera
+// carries it beyond double range (a finite point, a finite but extreme
+// camera). Throws for a non-finite point.
 bool toRaster(const MapInfo& info, LookupSpace space, const std::array<double, 3>& p, double& rx, double& ry,
               double& z) {
     if (space == LookupSpace::raster) {
@@ -152,13 +154,12 @@ bool toRaster(const MapInfo& info, LookupSpace space, const std::array<double, 3
         z = p[2];
         return true;
     }
+    if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+        throw Error(ErrorCode::argument, concat("lookup: ", space == LookupSpace::world ? "world" : "light",
+                                                "-space point ", p[0], ",", p[1], ",", p[2], " is not finite"));
     const std::array<double, 3> light = space == LookupSpace::world ? info.camera.worldToLightSpace(p) : p;
-    if (info.camera.lightToRaster(light, static_cast<int>(info.width), static_cast<int>(info.height), rx, ry, z))
-        return true;
-    if (!std::isfinite(light[0]) || !std::isfinite(light[1]) || !std::isfinite(light[2]))
-        throw Error(ErrorCode::argument,
-                    concat("lookup: light-space point ", light[0], ",", light[1], ",", light[2], " is not finite"));
-    return false;
+    return info.camera.lightToRaster(light, static_cast<int>(info.width), static_cast<int>(info.height), rx, ry, z) &&
+           std::isfinite(z);
 }
 
 }  // namespace

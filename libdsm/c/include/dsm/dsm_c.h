@@ -218,7 +218,8 @@ DSM_C_API void dsm_lookup_context_destroy(dsm_lookup_context* context);
 /** Filtered visibility of `count` points (`points` holds 3 doubles each).
  *  Writes 3 doubles per point to `visibility` (a monochrome map repeats its
  *  value) and, if `error_bounds` is not NULL, one bound on |V - exact| per
- *  point. Points outside the map or behind a perspective light are lit (1).
+ *  point. Points outside the map, behind a perspective light or carried
+ *  beyond double range by the map's camera are lit (1).
  *  Every point is looked up; one that fails (not finite, a tile that cannot be
  *  read) gets the failure value V = 1 with error bound 1, and the call returns
  *  the first such failure. `options` may be NULL (DSM_LOOKUP_OPTIONS_INIT). */

@@ -82,7 +82,9 @@ constexpr unsigned kDefaultThreadTiles = 64;
 /// itself: give each thread its own. The map must stay open while the
 /// context is used.
 ///
-/// Points outside the map (or behind a perspective light) are lit: V = 1.
+/// Points outside the map, behind a perspective light, or carried beyond
+/// double range by the map's camera (a finite point, an extreme camera) are
+/// lit: V = 1. A non-finite point is an argument error.
 /// Pixels of the footprint that fall outside the image are left out and the
 /// weights of the others renormalised.
 class DSM_API LookupContext {
