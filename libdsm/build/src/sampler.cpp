@@ -15,7 +15,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
-#include <tbb/task_group.h>
+#include <tbb/parallel_pipeline.h>
 
 #include "dsm/build_visibility.h"
 #include "dsm/compressor.h"
@@ -456,57 +456,52 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     BuildStats result;
     result.tolerance = tolerance;
     const std::uint32_t tilesX = writer.tilesX(), tilesY = writer.tilesY();
-    // Two rows of tiles: the writer takes one (in the arena, as one more task)
-    // while the workers build the next. Tiles reach the writer in the same
-    // order as without the overlap, so the file is the same.
-    std::array<std::vector<std::vector<VisibilityFunction>>, 2> rowTiles;
-    std::array<std::vector<TileStats>, 2> rowStats;
-    for (int k = 0; k < 2; ++k) {
-        rowTiles[k].resize(tilesX);
-        rowStats[k].resize(tilesX);
-    }
-    auto writeRow = [&](std::uint32_t ty) {
+    const std::uint64_t tileCount = std::uint64_t(tilesX) * tilesY;
+    // A pipeline over the tiles in row order: workers build any tile whose
+    // turn has come while one of them hands the finished ones to the writer
+    // in order (the file is the same for any thread count), so no row waits
+    // for its slowest tile. At most `inFlight` tiles are held at once, about
+    // one row of them; tile i lives in slot i % inFlight, free again by then
+    // because the writer takes tiles in order.
+    const std::size_t inFlight = std::size_t(tilesX) + 2 * static_cast<std::size_t>(arena.max_concurrency());
+    std::vector<std::vector<VisibilityFunction>> slotTiles(inFlight);
+    std::vector<TileStats> slotStats(inFlight);
+    std::uint64_t nextTile = 0;
+    auto writeTile = [&](std::uint64_t i) {
         const auto start = Clock::now();
-        for (std::uint32_t tx = 0; tx < tilesX; ++tx) {
-            writer.writeTile(tx, ty, rowTiles[ty % 2][tx]);
-            const TileStats& s = rowStats[ty % 2][tx];
-            result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
-            result.crossingSeconds += s.castSeconds;
-            result.sweepSeconds += s.timings.sweepSeconds;
-            result.compressionSeconds += s.timings.compressionSeconds;
-            result.samples += s.samples;
-            result.sampleVertices += s.rawVertices;
-            result.vertices += s.vertices;
-            result.maxVerticesPerPixel = std::max(result.maxVerticesPerPixel, s.maxVertices);
-        }
+        const std::uint32_t tx = static_cast<std::uint32_t>(i % tilesX), ty = static_cast<std::uint32_t>(i / tilesX);
+        writer.writeTile(tx, ty, slotTiles[i % inFlight]);
+        const TileStats& s = slotStats[i % inFlight];
+        result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
+        result.crossingSeconds += s.castSeconds;
+        result.sweepSeconds += s.timings.sweepSeconds;
+        result.compressionSeconds += s.timings.compressionSeconds;
+        result.samples += s.samples;
+        result.sampleVertices += s.rawVertices;
+        result.vertices += s.vertices;
+        result.maxVerticesPerPixel = std::max(result.maxVerticesPerPixel, s.maxVertices);
         result.writingSeconds += since(start);
+        if (options.progress && tx + 1 == tilesX && ty + 1 < tilesY) options.progress(double(ty + 1) / tilesY);
     };
-    // Declared after all the writing task uses, and waited for before any
-    // error leaves: the task never outlives them.
-    tbb::task_group writing;
-    auto finishWriting = [&] { arena.execute([&] { writing.wait(); }); };
-    try {
-        for (std::uint32_t ty = 0; ty < tilesY; ++ty) {
-            arena.execute([&] {
-                tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, tilesX, 1), [&](const auto& range) {
-                    for (std::uint32_t tx = range.begin(); tx < range.end(); ++tx) {
-                        rowStats[ty % 2][tx] = TileStats{};
-                        computeTile(tx, ty, rowTiles[ty % 2][tx], rowStats[ty % 2][tx]);
-                    }
-                });
-            });
-            finishWriting();  // the previous row: its buffers are the next row's
-            if (ty > 0 && options.progress) options.progress(double(ty) / tilesY);
-            arena.execute([&] { writing.run([&writeRow, ty] { writeRow(ty); }); });
-        }
-        finishWriting();
-    } catch (...) {
-        try {
-            finishWriting();
-        } catch (...) {  // the first error is the one to report
-        }
-        throw;
-    }
+    arena.execute([&] {
+        tbb::parallel_pipeline(
+            inFlight,
+            tbb::make_filter<void, std::uint64_t>(tbb::filter_mode::serial_in_order,
+                                                  [&](tbb::flow_control& control) -> std::uint64_t {
+                                                      if (nextTile == tileCount) control.stop();
+                                                      return nextTile++;
+                                                  }) &
+                tbb::make_filter<std::uint64_t, std::uint64_t>(tbb::filter_mode::parallel,
+                                                               [&](std::uint64_t i) {
+                                                                   TileStats& stats = slotStats[i % inFlight];
+                                                                   stats = TileStats{};
+                                                                   computeTile(static_cast<std::uint32_t>(i % tilesX),
+                                                                               static_cast<std::uint32_t>(i / tilesX),
+                                                                               slotTiles[i % inFlight], stats);
+                                                                   return i;
+                                                               }) &
+                tbb::make_filter<std::uint64_t, void>(tbb::filter_mode::serial_in_order, writeTile));
+    });
     if (options.progress) options.progress(1.0);
     const auto start = Clock::now();
     writer.finish();

@@ -79,7 +79,8 @@ struct BuildOptions {
     /// The tiles' compressor and, for zstd, its level (WriterOptions).
     TileCodec codec = TileCodec::Zlib;
     int zstdLevel = 19;
-    /// Called now and then with the fraction done, from the calling thread.
+    /// Called now and then with the fraction done, one call at a time, from
+    /// one of the build's threads (not necessarily the calling one).
     std::function<void(double)> progress;
     /// Receives the sample rays of each built pixel (x, y) before filtering:
     /// the raw data a deep image would hold (each ray's hits and volume
