@@ -3,6 +3,7 @@
 #include <gmock/gmock.h>
 #include <gtest/gtest.h>
 
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <random>
@@ -388,4 +389,62 @@ TEST(Transmittance, ReusedBuilderMatchesFreshBuilds) {
         }
         if (HasFailure()) return;
     }
+}
+
+namespace {
+
+// The prepared inputs agree field by field and bit for bit.
+void expectSamePrepared(const dsm::SweepInput& got, const dsm::SweepInput& want, const std::string& where) {
+    ASSERT_EQ(got.channels(), want.channels()) << where;
+    ASSERT_EQ(got.size(), want.size()) << where;
+    EXPECT_EQ(got.vertexCount(), want.vertexCount()) << where;
+    for (std::size_t i = 0; i < want.size(); ++i) {
+        EXPECT_EQ(std::bit_cast<std::uint32_t>(got.step(i).z), std::bit_cast<std::uint32_t>(want.step(i).z))
+            << where << " depth " << i;
+        EXPECT_EQ(got.step(i).count, want.step(i).count) << where << " depth " << i;
+        EXPECT_EQ(got.step(i).flags, want.step(i).flags) << where << " depth " << i;
+        for (int k = 0; k < 2 * want.channels(); ++k)
+            EXPECT_EQ(std::bit_cast<std::uint64_t>(got.changes(i)[k]), std::bit_cast<std::uint64_t>(want.changes(i)[k]))
+                << where << " depth " << i << " number " << k;
+    }
+}
+
+}  // namespace
+
+TEST(Transmittance, PreparedForTheSweepDirectlyAsIfBuiltThenAssigned) {
+    // Rays of steps alone are prepared without building the function: the
+    // result must be what assign() makes of the function, bit for bit, for
+    // every kind of ray (one builder and one input reused, so that storage
+    // inside and outside the object and growth are all exercised).
+    std::mt19937_64 rng(23);
+    std::uniform_real_distribution<float> depth(0.0f, 10.0f), unit(0.0f, 1.0f);
+    dsm::TransmittanceBuilder builder;
+    dsm::SweepInput prepared, reference;
+    int opaque = 0, tied = 0;
+    for (int trial = 0; trial < 400; ++trial) {
+        const int channels = trial % 3 == 0 ? 3 : 1;
+        const bool counts = trial % 4 != 1;
+        std::vector<SurfaceHit> hits(trial % 7 == 0 ? rng() % 40 : rng() % 5);
+        for (SurfaceHit& h : hits) {
+            h.z = trial % 2 ? std::round(depth(rng)) : depth(rng);
+            for (float& o : h.opacity) o = unit(rng) < 0.2f ? 0.0f : (unit(rng) < 0.1f ? 1.0f : unit(rng));
+            if (unit(rng) < 0.1f) h.opacity = {1.0f, 1.0f, 1.0f};
+            opaque += h.opacity[0] == 1.0f;
+        }
+        std::vector<VolumeSample> volume(trial % 5 == 0 ? rng() % 6 : 0);
+        for (VolumeSample& s : volume) s = {depth(rng), 0.5f * unit(rng)};
+        const float zStart = trial % 3 == 2 ? depth(rng) : -kInf;
+        const SampleRay ray{hits, volume};
+        builder.build(ray, channels, counts, zStart, prepared);
+        reference.assign(dsm::transmittance(ray, channels, counts, zStart));
+        tied += reference.vertexCount() > 2 * reference.size() || reference.size() < hits.size();
+        expectSamePrepared(prepared, reference, "trial " + std::to_string(trial));
+        if (trial % 10 == 0) {
+            const SurfaceHit bad[] = {hit(1.0f, 0.5f), hit(kNaN, 0.5f)};
+            EXPECT_THROW(builder.build(SampleRay{bad, {}}, channels, counts, -kInf, prepared), dsm::Error);
+        }
+        if (HasFailure()) return;
+    }
+    EXPECT_GT(opaque, 50);  // rays that reach 0, where the flags change
+    EXPECT_GT(tied, 50);    // hits sharing a depth, or dropped
 }

@@ -89,10 +89,9 @@ struct TileWorkspace {
     ScanlineHider::TileHits hits;
     std::vector<RaySurfaceHit> rayHits;
     std::vector<RayVolumeSample> volume;
-    // Per sample: its transmittance, built (in `tau`) and prepared for the
-    // sweep when a pixel first uses it, then shared by every pixel whose
-    // filter reaches the sample.
-    VisibilityFunction tau;
+    // Per sample: its transmittance, prepared for the sweep when a pixel
+    // first uses it, then shared by every pixel whose filter reaches the
+    // sample.
     std::vector<SweepInput> transmittances;
     std::vector<unsigned char> built;
     // One pixel's inputs.
@@ -426,8 +425,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                                 const SampleRay ray{ws.hitsOf(s), s.volume};
                                 if (!ws.built[i]) {
                                     try {
-                                        ws.transmittance.build(ray, channels, counts, kFromTheStart, ws.tau);
-                                        ws.transmittances[i].assign(ws.tau);
+                                        ws.transmittance.build(ray, channels, counts, kFromTheStart,
+                                                               ws.transmittances[i]);
                                     } catch (const Error& e) {
                                         throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ",
                                                                      ws.rays.size(), ": ", e.what()));

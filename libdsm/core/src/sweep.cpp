@@ -104,16 +104,19 @@ void SweepInput::assign(const VisibilityView& f) {
     if (f.layerCount() != 1)
         throw Error(ErrorCode::argument, detail::concat("sweep: an input has ", f.layerCount(),
                                                         " layers; the sweep averages single-layer functions"));
-    channels_ = f.channels();
     vertices_ = f.size();
-    // Room for its distinct depths (storageFor()).
     const Span<const float> z = f.depths();
     std::size_t depths = 0;
     for (std::size_t i = 0; i < z.size(); ++i) depths += i == 0 || z[i] != z[i - 1];
-    const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels_);
+    reserveDepths(depths, f.channels());
+    size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
+}
+
+void SweepInput::reserveDepths(std::size_t depths, int channels) {
+    channels_ = channels;
+    const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels);
     stepData_ = storageFor(depths, inlineSteps_, kInlineDepths, steps_, stepCapacity_);
     numberData_ = storageFor(numbers, inlineNumbers_, 2 * kInlineDepths, numbers_, numberCapacity_);
-    size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
 }
 
 template <std::size_t NC>

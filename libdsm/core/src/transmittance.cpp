@@ -68,6 +68,62 @@ struct TransmittanceBuilder::Impl {
     std::vector<VolumeSample> volume, volumeScratch;
     std::vector<std::uint32_t> order;
     std::vector<double> volumeTau;
+    VisibilityFunction function;  // a ray with volume, on its way to a SweepInput
+
+    // Checks the ray and keeps in `hits` those beyond zStart that block some
+    // light, sorted by depth (equal depths in the ray's order).
+    void sortedHits(const SampleRay& ray, int channels, float zStart) {
+        if (channels != 1 && channels != kMaxChannels)
+            throw Error(ErrorCode::argument, detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
+        checkHits(ray.hits, channels);
+        checkVolume(ray.volume);
+
+        hits.clear();
+        for (const SurfaceHit& h : ray.hits)
+            if (h.z > zStart && !blocksNothing(h, channels)) hits.push_back(h);
+        sortByDepth(hits, order, hitScratch);
+    }
+
+    // What build() emits for hits alone, two vertices at each distinct depth
+    // (tau before, tau after), and what SweepInput::assignWith() makes of them:
+    // one step a depth, its height after - before from the float values, flat
+    // after it, and its hits' count.
+    template <std::size_t NC>
+    static void prepareSteps(const std::vector<SurfaceHit>& hits, bool withCounts, SweepInput& out) {
+        std::size_t depths = 0;
+        for (std::size_t i = 0; i < hits.size(); ++i) depths += i == 0 || hits[i].z != hits[i - 1].z;
+        out.reserveDepths(depths, static_cast<int>(NC));
+        out.vertices_ = 2 * depths;
+        out.size_ = depths;
+        double surfaceTau[NC];
+        float before[NC];
+        bool atZero[NC];
+        for (std::size_t c = 0; c < NC; ++c) {
+            surfaceTau[c] = 1.0;
+            before[c] = 1.0f;
+            atZero[c] = false;
+        }
+        std::size_t h = 0;
+        for (std::size_t d = 0; d < depths; ++d) {
+            const float z = hits[h].z;
+            std::uint32_t hitCount = 0;
+            for (; h < hits.size() && hits[h].z == z; ++h, ++hitCount)
+                for (std::size_t c = 0; c < NC; ++c) surfaceTau[c] *= 1.0 - static_cast<double>(hits[h].opacity[c]);
+            SweepInput::Step step{z, withCounts ? hitCount : 0u, 0u};
+            double* valueChange = out.numberData_ + d * 2 * NC;
+            for (std::size_t c = 0; c < NC; ++c) {
+                const float after = std::min(static_cast<float>(surfaceTau[c]), before[c]);
+                valueChange[c] = static_cast<double>(after) - static_cast<double>(before[c]);
+                valueChange[NC + c] = 0.0;
+                if ((after == 0.0f) != atZero[c]) {
+                    atZero[c] = after == 0.0f;
+                    step.flags |= (atZero[c] ? SweepInput::kReachesZero : SweepInput::kLeavesZero) << (2 * c);
+                }
+                before[c] = after;
+            }
+            out.stepData_[d] = step;
+        }
+    }
 };
 
 TransmittanceBuilder::TransmittanceBuilder() : impl_(std::make_unique<Impl>()) {}
@@ -81,18 +137,23 @@ VisibilityFunction transmittance(const SampleRay& ray, int channels, bool withCo
     return out;
 }
 
+void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCounts, float zStart, SweepInput& out) {
+    if (!ray.volume.empty()) {
+        build(ray, channels, withCounts, zStart, impl_->function);
+        out.assign(impl_->function);
+        return;
+    }
+    impl_->sortedHits(ray, channels, zStart);
+    if (channels == 1)
+        Impl::prepareSteps<1>(impl_->hits, withCounts, out);
+    else
+        Impl::prepareSteps<kMaxChannels>(impl_->hits, withCounts, out);
+}
+
 void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCounts, float zStart,
                                  VisibilityFunction& out) {
-    if (channels != 1 && channels != kMaxChannels)
-        throw Error(ErrorCode::argument, detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
-    checkHits(ray.hits, channels);
-    checkVolume(ray.volume);
-
+    impl_->sortedHits(ray, channels, zStart);
     std::vector<SurfaceHit>& hits = impl_->hits;
-    hits.clear();
-    for (const SurfaceHit& h : ray.hits)
-        if (h.z > zStart && !blocksNothing(h, channels)) hits.push_back(h);
-    sortByDepth(hits, impl_->order, impl_->hitScratch);
 
     std::vector<VolumeSample>& volume = impl_->volume;
     volume.assign(ray.volume.begin(), ray.volume.end());

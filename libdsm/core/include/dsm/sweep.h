@@ -89,8 +89,14 @@ public:
     const double* changes(std::size_t i) const { return numberData_ + i * 2 * static_cast<std::size_t>(channels_); }
 
 private:
+    // Prepares surface-only transmittances without building the function.
+    friend class TransmittanceBuilder;
+
     template <std::size_t NC>
     std::size_t assignWith(const VisibilityView& f);
+    // Points stepData_ and numberData_ at room for `depths` depths of
+    // `channels` channels and sets channels_.
+    void reserveDepths(std::size_t depths, int channels);
 
     // Where the steps and numbers are: inside the object (inlineSteps_,
     // inlineNumbers_) or in the heap arrays.

@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "dsm/span.h"
+#include "dsm/sweep.h"
 #include "dsm/version.h"
 #include "dsm/visibility.h"
 
@@ -69,6 +70,11 @@ public:
     /// reusing its storage. Same checks and errors; `out` is unspecified
     /// after an error.
     void build(const SampleRay& ray, int channels, bool withCounts, float zStart, VisibilityFunction& out);
+    /// Prepares the same transmittance for the sweep: what out.assign() of
+    /// the function above gives, bit for bit. A ray without volume samples
+    /// (steps alone) is prepared directly, without building the function.
+    /// Same checks and errors; `out` is unspecified after an error.
+    void build(const SampleRay& ray, int channels, bool withCounts, float zStart, SweepInput& out);
 
 private:
     struct Impl;
