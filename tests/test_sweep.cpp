@@ -130,6 +130,47 @@ INSTANTIATE_TEST_SUITE_P(
                       Mix{"n256_rgb_shared", 256, 3, 0.125f, true, false}),
     [](const ::testing::TestParamInfo<Mix>& info) { return std::string(info.param.name); });
 
+// Transmittances of surface hits alone are flat between their steps: the
+// sweep then leaves out the slope bookkeeping. Such inputs, alone and with
+// one sloped input among them (which brings the bookkeeping back), must both
+// match the oracle, in mono and RGB.
+TEST(Sweep, InputsOfStepsAloneAndWithOneSlopedInputMatchTheOracle) {
+    std::mt19937_64 rng(77);
+    std::uniform_real_distribution<float> depth(0.0f, 8.0f), unit(0.0f, 1.0f);
+    std::uniform_real_distribution<double> weight(0.01, 3.0);
+    for (int channels : {1, 3}) {
+        for (int trial = 0; trial < 20; ++trial) {
+            std::vector<VisibilityFunction> inputs;
+            std::vector<double> weights;
+            for (int k = 0; k < 40; ++k) {
+                std::vector<dsm::SurfaceHit> hits(rng() % 5);
+                for (dsm::SurfaceHit& h : hits) {
+                    h.z = trial % 2 ? std::round(4.0f * depth(rng)) / 4.0f : depth(rng);
+                    for (float& o : h.opacity) o = unit(rng) < 0.1f ? 1.0f : unit(rng);
+                }
+                inputs.push_back(dsm::transmittance(dsm::SampleRay{hits, {}}, channels, true));
+                weights.push_back(weight(rng));
+                dsm::SweepInput prepared;
+                prepared.assign(inputs.back());
+                ASSERT_FALSE(prepared.slopes());
+            }
+            expectMatchesOracle(inputs, weights, channels, runSweep(inputs, weights, channels));
+            VisibilityFunction sloped(channels, true);
+            const float top[3] = {1.0f, 1.0f, 1.0f}, middle[3] = {0.6f, 0.5f, 0.7f}, bottom[3] = {0.2f, 0.1f, 0.3f};
+            sloped.append(depth(rng) * 0.25f, top, 1);
+            sloped.append(4.0f + depth(rng) * 0.25f, middle, 1);
+            sloped.append(6.5f + depth(rng) * 0.25f, bottom, 1);
+            inputs.push_back(sloped);
+            weights.push_back(weight(rng));
+            dsm::SweepInput prepared;
+            prepared.assign(inputs.back());
+            ASSERT_TRUE(prepared.slopes());
+            expectMatchesOracle(inputs, weights, channels, runSweep(inputs, weights, channels));
+            if (HasFailure()) return;
+        }
+    }
+}
+
 TEST(Sweep, SingleInputIsReproduced) {
     VisibilityFunction f(1, true);
     f.append(1.0f, 1.0f, 0);

@@ -398,6 +398,7 @@ void expectSamePrepared(const dsm::SweepInput& got, const dsm::SweepInput& want,
     ASSERT_EQ(got.channels(), want.channels()) << where;
     ASSERT_EQ(got.size(), want.size()) << where;
     EXPECT_EQ(got.vertexCount(), want.vertexCount()) << where;
+    EXPECT_EQ(got.slopes(), want.slopes()) << where;
     for (std::size_t i = 0; i < want.size(); ++i) {
         EXPECT_EQ(std::bit_cast<std::uint32_t>(got.step(i).z), std::bit_cast<std::uint32_t>(want.step(i).z))
             << where << " depth " << i;

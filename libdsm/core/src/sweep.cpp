@@ -91,6 +91,7 @@ SweepInput& SweepInput::operator=(SweepInput&& other) noexcept {
     size_ = std::exchange(other.size_, 0);
     vertices_ = std::exchange(other.vertices_, 0);
     channels_ = other.channels_;
+    slopes_ = std::exchange(other.slopes_, false);
     stepData_ = stepsInside ? inlineSteps_ : steps_.get();
     numberData_ = numbersInside ? inlineNumbers_ : numbers_.get();
     other.stepData_ = other.inlineSteps_;
@@ -109,6 +110,7 @@ void SweepInput::assign(const VisibilityView& f) {
     std::size_t depths = 0;
     for (std::size_t i = 0; i < z.size(); ++i) depths += i == 0 || z[i] != z[i - 1];
     reserveDepths(depths, f.channels());
+    slopes_ = false;
     size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
 }
 
@@ -165,6 +167,7 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
             }
         }
         if (slopingAfter != sloping) step.flags |= slopingAfter ? kStartsSloping : kStopsSloping;
+        slopes_ = slopes_ || slopingAfter;
         sloping = slopingAfter;
         out[depths] = step;
         first = last + 1;
@@ -208,8 +211,7 @@ struct Sweeper::Impl {
             prepared[k].assign(VisibilityView(inputs[k]));
             preparedInputs.push_back(&prepared[k]);
         }
-        return channels == 1 ? run<1>(Span<const SweepInput* const>(preparedInputs), sink)
-                             : run<kMaxChannels>(Span<const SweepInput* const>(preparedInputs), sink);
+        return dispatch(Span<const SweepInput* const>(preparedInputs), channels, sink);
     }
 
     template <class Sink>
@@ -221,15 +223,24 @@ struct Sweeper::Impl {
                                                                 " channels, expected ", channels));
         });
         if (!any) return std::nullopt;
-        // The channel count as a constant lets the compiler unroll the
-        // per-channel loops (the arithmetic stays the same).
-        return channels == 1 ? run<1>(inputs, sink) : run<kMaxChannels>(inputs, sink);
+        return dispatch(inputs, channels, sink);
+    }
+
+    // The channel count as a constant lets the compiler unroll the
+    // per-channel loops; inputs that are all flat between their steps (rays
+    // of surface hits alone) skip the slope bookkeeping, whose terms would
+    // all be 0. The arithmetic on values is the same either way.
+    template <class Sink>
+    std::optional<float> dispatch(Span<const SweepInput* const> inputs, int channels, Sink& sink) {
+        const bool sloped = std::any_of(inputs.begin(), inputs.end(), [](const SweepInput* f) { return f->slopes(); });
+        if (channels == 1) return sloped ? run<1, true>(inputs, sink) : run<1, false>(inputs, sink);
+        return sloped ? run<kMaxChannels, true>(inputs, sink) : run<kMaxChannels, false>(inputs, sink);
     }
 
     // The sweep proper, over checked inputs with NC channels and weights w.
     // Sink is VertexSink, or a final one whose push() the compiler calls
     // directly.
-    template <std::size_t NC, class Sink>
+    template <std::size_t NC, bool Sloped, class Sink>
     std::optional<float> run(Span<const SweepInput* const> inputs, Sink& sink);
 };
 
@@ -298,7 +309,7 @@ bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, 
     return true;
 }
 
-template <std::size_t NC, class Sink>
+template <std::size_t NC, bool Sloped, class Sink>
 std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Sink& sink) {
     const std::size_t n = inputs.size();
     constexpr std::size_t nc = NC;
@@ -346,18 +357,20 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
             const std::size_t i = next[k]++;
             const SweepInput::Step& step = f.step(i);
             const double* valueChange = f.changes(i);
-            const double* slopeAfter = valueChange + nc;
-            // The slope before this depth: the one after the input's previous
-            // depth, 0 before its first.
-            const double* slopeBefore = i == 0 ? nullptr : f.changes(i - 1) + nc;
             const double wk = w[k];
             count += step.count;
-            for (std::size_t c = 0; c < nc; ++c) {
-                value[c] += wk * valueChange[c];
-                const double change = wk * (slopeAfter[c] - (slopeBefore ? slopeBefore[c] : 0.0));
-                if (change != 0.0) {
-                    outSlope[c] += change;
-                    slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
+            for (std::size_t c = 0; c < nc; ++c) value[c] += wk * valueChange[c];
+            if constexpr (Sloped) {
+                const double* slopeAfter = valueChange + nc;
+                // The slope before this depth: the one after the input's
+                // previous depth, 0 before its first.
+                const double* slopeBefore = i == 0 ? nullptr : f.changes(i - 1) + nc;
+                for (std::size_t c = 0; c < nc; ++c) {
+                    const double change = wk * (slopeAfter[c] - (slopeBefore ? slopeBefore[c] : 0.0));
+                    if (change != 0.0) {
+                        outSlope[c] += change;
+                        slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
+                    }
                 }
             }
             if (step.flags != 0 && wk > 0.0) {

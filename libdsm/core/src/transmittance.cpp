@@ -95,6 +95,7 @@ struct TransmittanceBuilder::Impl {
         out.reserveDepths(depths, static_cast<int>(NC));
         out.vertices_ = 2 * depths;
         out.size_ = depths;
+        out.slopes_ = false;
         double surfaceTau[NC];
         float before[NC];
         bool atZero[NC];

@@ -83,6 +83,10 @@ public:
     /// Its distinct depths (in storage order, equal neighbours grouped).
     std::size_t size() const { return size_; }
     bool empty() const { return size_ == 0; }
+    /// Whether some segment of the function slopes (in some channel); false
+    /// for vertical steps between flat stretches, such as the transmittance
+    /// of surface hits alone.
+    bool slopes() const { return slopes_; }
     const Step& step(std::size_t i) const { return stepData_[i]; }
     /// At depth i, per channel: the change of value (the step's height), then
     /// the slope after it, each `channels()` doubles.
@@ -113,6 +117,7 @@ private:
     std::size_t size_ = 0;
     std::size_t vertices_ = 0;
     int channels_ = 1;
+    bool slopes_ = false;
 };
 
 /// The sweep's output kept as it comes, values in double precision, for a
