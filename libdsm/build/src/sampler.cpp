@@ -43,6 +43,11 @@ using Clock = std::chrono::steady_clock;
 // Samples a worker holds at once for one tile (see computeTile).
 constexpr std::size_t kBandSamples = std::size_t(1) << 20;
 
+// Level-0 tiles a build holds at once (built, or waiting for the writer):
+// about one row of them, and two for each worker so that none waits for a
+// tile to start while the writer catches up.
+std::size_t tilesInFlight(std::uint32_t tilesX, unsigned threads) { return std::size_t(tilesX) + 2 * std::size_t(threads); }
+
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
 // Weight of a sample at offset (dx, dy) pixels from a pixel centre.
@@ -165,8 +170,10 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& given) {
                                     4 * (sizeof(SweepInput::Step) + 2 * sizeof(double) * std::uint64_t(channels));
     const std::uint64_t samples =
         std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
-    // Two rows of tiles (one written while the next is built) and the pending mip tiles.
-    e.memoryBytes = directory + 3 * row + samples;
+    // The tiles in flight (tilesInFlight()) and the pending mip tiles, about a row of them.
+    const unsigned threads = usableThreads(options.threads.value_or(0));
+    const std::uint64_t held = tilesInFlight(static_cast<std::uint32_t>((e.width + tile - 1) / tile), threads);
+    e.memoryBytes = directory + held * tile * tile * perPixel + row + samples;
     return e;
 }
 
@@ -459,10 +466,10 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     // A pipeline over the tiles in row order: workers build any tile whose
     // turn has come while one of them hands the finished ones to the writer
     // in order (the file is the same for any thread count), so no row waits
-    // for its slowest tile. At most `inFlight` tiles are held at once, about
-    // one row of them; tile i lives in slot i % inFlight, free again by then
-    // because the writer takes tiles in order.
-    const std::size_t inFlight = std::size_t(tilesX) + 2 * static_cast<std::size_t>(arena.max_concurrency());
+    // for its slowest tile. At most `inFlight` tiles are held at once; tile i
+    // lives in slot i % inFlight, free again by then because the writer takes
+    // tiles in order.
+    const std::size_t inFlight = tilesInFlight(tilesX, static_cast<unsigned>(arena.max_concurrency()));
     std::vector<std::vector<VisibilityFunction>> slotTiles(inFlight);
     std::vector<TileStats> slotStats(inFlight);
     std::uint64_t nextTile = 0;

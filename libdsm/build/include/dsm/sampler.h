@@ -116,9 +116,10 @@ struct BuildEstimate {
     std::uint64_t pixels = 0;        ///< pixels built: the region's
     std::uint64_t sampleRays = 0;    ///< pixels x samples per pixel
     /// Memory the build holds at once, at least: the tile directories of all
-    /// levels, the pixel functions of two rows of tiles (one written while
-    /// the next is built) and of the pending mip tiles (a few vertices each),
-    /// and each worker's samples of one tile with their transmittances.
+    /// levels, the pixel functions of the level-0 tiles in flight (a row of
+    /// tiles and two per worker, built or waiting for the writer) and of the
+    /// pending mip tiles (a few vertices each), and each worker's samples of
+    /// one tile with their transmittances.
     std::uint64_t memoryBytes = 0;
 };
 
