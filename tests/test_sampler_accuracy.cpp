@@ -684,6 +684,34 @@ TEST(SamplerAccuracy, RegionMatchesFullBuild) {
 
 namespace {
 
+// A whole-image build with a filter reaching the neighbouring pixels, so
+// that tiles also sample their borders: each pixel's own rays are handed
+// over once, by the tile the pixel belongs to, and no border sample is.
+TEST(SamplerRawSamples, EveryPixelOfAWholeImageReceivesItsRaysOnce) {
+    TempDir dir;
+    const dsm::Scene scene = sceneWith(orthoLight(19), {wall(3.0, {0.4f, 0.4f, 0.4f})});
+    dsm::BuildOptions options = boxOptions(5, 0.0);
+    options.filter = dsm::PixelFilter::Gaussian;
+    options.filterWidth = 3.0;
+    options.tileSize = 8;
+    std::mutex mutex;
+    std::vector<int> calls(19 * 19, 0);
+    bool raysAsExpected = true;
+    options.sampleRays = [&](std::uint32_t x, std::uint32_t y, std::span<const dsm::SampleRay> rays) {
+        std::lock_guard<std::mutex> lock(mutex);
+        ++calls[y * 19 + x];
+        if (rays.size() != 5) raysAsExpected = false;
+        for (const dsm::SampleRay& r : rays)
+            if (r.hits.size() != 1 || std::abs(r.hits[0].z - 3.0f) > 1e-5f || r.hits[0].opacity[0] != 0.4f)
+                raysAsExpected = false;
+    };
+    const dsm::BuildStats stats = dsm::buildMap(scene, options, (dir / "raw.dsm").string());
+    EXPECT_GT(stats.samples, 19u * 19u * 5u);  // the tiles' borders were sampled too
+    EXPECT_TRUE(raysAsExpected);
+    for (std::uint32_t y = 0; y < 19; ++y)
+        for (std::uint32_t x = 0; x < 19; ++x) EXPECT_EQ(calls[y * 19 + x], 1) << x << "," << y;
+}
+
 TEST(SamplerRawSamples, EveryPixelOfTheRegionReceivesItsRaysOnce) {
     TempDir dir;
     const dsm::Scene scene = sceneWith(orthoLight(16), {wall(3.0, {0.4f, 0.4f, 0.4f})});
