@@ -597,6 +597,17 @@ dsm::LightCamera rigidCamera(dsm::Projection projection, double a, double b, std
     return cam;
 }
 
+// Options of a small map seen through `camera`, for the lookups in world and
+// light space.
+WriterOptions cameraMapOptions(int channels, const dsm::LightCamera& camera) {
+    WriterOptions o;
+    o.tileSize = 8;
+    o.channels = channels;
+    o.tolerance = 0.001;
+    o.camera = camera;
+    return o;
+}
+
 // Light point -> world point through the inverse of a rigid transform.
 std::array<double, 3> lightToWorld(const dsm::LightCamera& cam, const std::array<double, 3>& l) {
     const auto& m = cam.worldToLight;
@@ -609,13 +620,10 @@ std::array<double, 3> lightToWorld(const dsm::LightCamera& cam, const std::array
 TEST(LookupSpace, WorldAndLightAgreeWithRasterForBothProjections) {
     for (dsm::Projection projection : {dsm::Projection::Perspective, dsm::Projection::Orthographic}) {
         SCOPED_TRACE(projection == dsm::Projection::Perspective ? "perspective" : "orthographic");
-        WriterOptions o;
-        o.tileSize = 8;
-        o.channels = 3;
-        o.tolerance = 0.001;
-        o.camera = rigidCamera(projection, 0.5, -0.3, {0.25, -1.5, 0.75},
-                               projection == dsm::Projection::Perspective ? std::array<double, 4>{-0.6, 0.4, -0.35, 0.45}
-                                                                          : std::array<double, 4>{-3.0, 5.0, -2.0, 4.0});
+        const WriterOptions o = cameraMapOptions(
+            3, rigidCamera(projection, 0.5, -0.3, {0.25, -1.5, 0.75},
+                           projection == dsm::Projection::Perspective ? std::array<double, 4>{-0.6, 0.4, -0.35, 0.45}
+                                                                      : std::array<double, 4>{-3.0, 5.0, -2.0, 4.0}));
         const auto m = writeAndOpen(smoothImage(40, 30, 3), o);
         LookupContext ctx(m->map);
         const dsm::LightCamera& cam = m->map->info().camera;
@@ -680,13 +688,10 @@ TEST(LookupSpace, WorldAndLightAgreeWithRasterForBothProjections) {
 TEST(LookupSpace, FinitePointsThatAnExtremeCameraCarriesBeyondDoubleRangeAreLit) {
     for (dsm::Projection projection : {dsm::Projection::Perspective, dsm::Projection::Orthographic}) {
         SCOPED_TRACE(projection == dsm::Projection::Perspective ? "perspective" : "orthographic");
-        WriterOptions o;
-        o.tileSize = 8;
-        o.channels = 1;
-        o.tolerance = 0.001;
-        o.camera = rigidCamera(projection, 0.0, 0.0, {0.0, 0.0, 1.0}, {-1.0, 1.0, -1.0, 1.0});
-        o.camera.worldToLight[1] = -1.6e264;  // x depends on y, enormously
-        o.camera.worldToLight[10] = 1e308;    // and depth on z
+        dsm::LightCamera camera = rigidCamera(projection, 0.0, 0.0, {0.0, 0.0, 1.0}, {-1.0, 1.0, -1.0, 1.0});
+        camera.worldToLight[1] = -1.6e264;  // x depends on y, enormously
+        camera.worldToLight[10] = 1e308;    // and depth on z
+        const WriterOptions o = cameraMapOptions(1, camera);
         const auto m = writeAndOpen(smoothImage(16, 16, 1), o);
         LookupContext ctx(m->map);
         LookupOptions wide;

@@ -684,57 +684,60 @@ TEST(SamplerAccuracy, RegionMatchesFullBuild) {
 
 namespace {
 
+// Records the sampleRays calls of a build of wallScene(): how often each
+// pixel's rays arrive, and whether each call held `spp` rays that crossed the
+// wall alone.
+struct WallRayRecorder {
+    WallRayRecorder(std::uint32_t side, std::uint32_t spp, dsm::BuildOptions& options)
+        : size(side), calls(side * side, 0) {
+        options.sampleRays = [this, spp](std::uint32_t x, std::uint32_t y, std::span<const dsm::SampleRay> rays) {
+            std::lock_guard<std::mutex> lock(mutex);
+            ++calls[y * size + x];
+            if (rays.size() != spp) raysAsExpected = false;
+            for (const dsm::SampleRay& r : rays)
+                if (r.hits.size() != 1 || std::abs(r.hits[0].z - 3.0f) > 1e-5f || r.hits[0].opacity[0] != 0.4f ||
+                    !r.volume.empty())
+                    raysAsExpected = false;
+        };
+    }
+    int callsAt(std::uint32_t x, std::uint32_t y) const { return calls[y * size + x]; }
+
+    std::uint32_t size;
+    std::mutex mutex;
+    std::vector<int> calls;
+    bool raysAsExpected = true;
+};
+
+dsm::Scene wallScene(std::uint32_t size) { return sceneWith(orthoLight(size), {wall(3.0, {0.4f, 0.4f, 0.4f})}); }
+
 // A whole-image build with a filter reaching the neighbouring pixels, so
 // that tiles also sample their borders: each pixel's own rays are handed
 // over once, by the tile the pixel belongs to, and no border sample is.
 TEST(SamplerRawSamples, EveryPixelOfAWholeImageReceivesItsRaysOnce) {
     TempDir dir;
-    const dsm::Scene scene = sceneWith(orthoLight(19), {wall(3.0, {0.4f, 0.4f, 0.4f})});
     dsm::BuildOptions options = boxOptions(5, 0.0);
     options.filter = dsm::PixelFilter::Gaussian;
     options.filterWidth = 3.0;
     options.tileSize = 8;
-    std::mutex mutex;
-    std::vector<int> calls(19 * 19, 0);
-    bool raysAsExpected = true;
-    options.sampleRays = [&](std::uint32_t x, std::uint32_t y, std::span<const dsm::SampleRay> rays) {
-        std::lock_guard<std::mutex> lock(mutex);
-        ++calls[y * 19 + x];
-        if (rays.size() != 5) raysAsExpected = false;
-        for (const dsm::SampleRay& r : rays)
-            if (r.hits.size() != 1 || std::abs(r.hits[0].z - 3.0f) > 1e-5f || r.hits[0].opacity[0] != 0.4f)
-                raysAsExpected = false;
-    };
-    const dsm::BuildStats stats = dsm::buildMap(scene, options, (dir / "raw.dsm").string());
+    WallRayRecorder recorder(19, 5, options);
+    const dsm::BuildStats stats = dsm::buildMap(wallScene(19), options, (dir / "raw.dsm").string());
     EXPECT_GT(stats.samples, 19u * 19u * 5u);  // the tiles' borders were sampled too
-    EXPECT_TRUE(raysAsExpected);
+    EXPECT_TRUE(recorder.raysAsExpected);
     for (std::uint32_t y = 0; y < 19; ++y)
-        for (std::uint32_t x = 0; x < 19; ++x) EXPECT_EQ(calls[y * 19 + x], 1) << x << "," << y;
+        for (std::uint32_t x = 0; x < 19; ++x) EXPECT_EQ(recorder.callsAt(x, y), 1) << x << "," << y;
 }
 
 TEST(SamplerRawSamples, EveryPixelOfTheRegionReceivesItsRaysOnce) {
     TempDir dir;
-    const dsm::Scene scene = sceneWith(orthoLight(16), {wall(3.0, {0.4f, 0.4f, 0.4f})});
     dsm::BuildOptions options = boxOptions(9, 0.0);
     options.region = {2, 3, 13, 11};
-    std::mutex mutex;
-    std::vector<int> calls(16 * 16, 0);
-    bool raysAsExpected = true;
-    options.sampleRays = [&](std::uint32_t x, std::uint32_t y, std::span<const dsm::SampleRay> rays) {
-        std::lock_guard<std::mutex> lock(mutex);
-        ++calls[y * 16 + x];
-        if (rays.size() != 9) raysAsExpected = false;
-        for (const dsm::SampleRay& r : rays)
-            if (r.hits.size() != 1 || std::abs(r.hits[0].z - 3.0f) > 1e-5f || r.hits[0].opacity[0] != 0.4f ||
-                !r.volume.empty())
-                raysAsExpected = false;
-    };
-    dsm::buildMap(scene, options, (dir / "raw.dsm").string());
-    EXPECT_TRUE(raysAsExpected);
+    WallRayRecorder recorder(16, 9, options);
+    dsm::buildMap(wallScene(16), options, (dir / "raw.dsm").string());
+    EXPECT_TRUE(recorder.raysAsExpected);
     for (std::uint32_t y = 0; y < 16; ++y)
         for (std::uint32_t x = 0; x < 16; ++x) {
             const bool inside = x >= 2 && x < 13 && y >= 3 && y < 11;
-            EXPECT_EQ(calls[y * 16 + x], inside ? 1 : 0) << x << "," << y;
+            EXPECT_EQ(recorder.callsAt(x, y), inside ? 1 : 0) << x << "," << y;
         }
 }
 

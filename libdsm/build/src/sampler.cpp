@@ -11,9 +11,7 @@
 #include <vector>
 
 #include <nlohmann/json.hpp>
-#include <tbb/blocked_range.h>
 #include <tbb/enumerable_thread_specific.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <tbb/parallel_pipeline.h>
 
@@ -168,10 +166,9 @@ BuildEstimate estimateBuild(const Scene& scene, const BuildOptions& given) {
     // sweep (four depths).
     const std::uint64_t perSample = sizeof(SampleData) + 2 * sizeof(SurfaceHit) + sizeof(SweepInput) +
                                     4 * (sizeof(SweepInput::Step) + 2 * sizeof(double) * std::uint64_t(channels));
-    const std::uint64_t samples =
-        std::uint64_t(usableThreads(options.threads.value_or(0))) * samplePixels * options.samplesPerPixel * perSample;
-    // The tiles in flight (tilesInFlight()) and the pending mip tiles, about a row of them.
     const unsigned threads = usableThreads(options.threads.value_or(0));
+    const std::uint64_t samples = std::uint64_t(threads) * samplePixels * options.samplesPerPixel * perSample;
+    // The tiles in flight (tilesInFlight()) and the pending mip tiles, about a row of them.
     const std::uint64_t held = tilesInFlight(static_cast<std::uint32_t>((e.width + tile - 1) / tile), threads);
     e.memoryBytes = directory + held * tile * tile * perPixel + row + samples;
     return e;
