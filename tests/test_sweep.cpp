@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -167,6 +168,58 @@ TEST(Sweep, InputsOfStepsAloneAndWithOneSlopedInputMatchTheOracle) {
             ASSERT_TRUE(prepared.slopes());
             expectMatchesOracle(inputs, weights, channels, runSweep(inputs, weights, channels));
             if (HasFailure()) return;
+        }
+    }
+}
+
+// Inputs of steps alone are summed by sorting all their steps at once; any
+// input that slopes sends the sweep through a heap of the inputs instead.
+// Both must add the same terms in the same order (by depth, ties in input
+// order), so a weight-0 sloped input beyond every other depth, which adds
+// nothing but its own depths, must leave every vertex before it bit for bit.
+TEST(Sweep, InputsOfStepsAloneSumInTheHeapsOrderBitForBit) {
+    std::mt19937_64 rng(2026);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f), exponent(-6.0f, 6.0f);
+    std::uniform_real_distribution<double> weight(0.01, 3.0);
+    for (int channels : {1, 3}) {
+        for (int trial = 0; trial < 60; ++trial) {
+            // From a handful of events (sorted by insertion) to hundreds
+            // (radix), depths tied on a grid or spread over 2^-6 .. 2^6 (the
+            // radix passes over bytes that differ), some weights 0.
+            const std::size_t functions = 1 + rng() % (trial % 3 == 0 ? 6 : 120);
+            std::vector<VisibilityFunction> inputs;
+            std::vector<double> weights;
+            for (std::size_t k = 0; k < functions; ++k) {
+                std::vector<dsm::SurfaceHit> hits(rng() % 6);
+                for (dsm::SurfaceHit& h : hits) {
+                    h.z = trial % 2 ? std::round(8.0f * unit(rng)) / 4.0f : std::exp2(exponent(rng));
+                    for (float& o : h.opacity) o = unit(rng) < 0.1f ? 1.0f : unit(rng);
+                }
+                inputs.push_back(dsm::transmittance(dsm::SampleRay{hits, {}}, channels, true));
+                weights.push_back(rng() % 8 == 0 ? 0.0 : weight(rng));
+            }
+            weights.front() = weight(rng);  // the weights may not all be 0
+            const RecordingSink flat = runSweep(inputs, weights, channels);
+
+            VisibilityFunction sloped(channels, true);
+            const float top[3] = {1.0f, 1.0f, 1.0f}, bottom[3] = {0.2f, 0.1f, 0.3f};
+            sloped.append(1000.0f, top, 1);
+            sloped.append(2000.0f, bottom, 1);
+            inputs.push_back(sloped);
+            weights.push_back(0.0);
+            const RecordingSink heap = runSweep(inputs, weights, channels);
+
+            ASSERT_EQ(heap.vertices.size(), flat.vertices.size() + 2);
+            for (std::size_t i = 0; i < flat.vertices.size(); ++i) {
+                ASSERT_EQ(std::bit_cast<std::uint32_t>(flat.vertices[i].z),
+                          std::bit_cast<std::uint32_t>(heap.vertices[i].z))
+                    << "vertex " << i;
+                ASSERT_EQ(flat.vertices[i].count, heap.vertices[i].count) << "vertex " << i;
+                for (std::size_t c = 0; c < static_cast<std::size_t>(channels); ++c)
+                    ASSERT_EQ(std::bit_cast<std::uint64_t>(flat.vertices[i].v[c]),
+                              std::bit_cast<std::uint64_t>(heap.vertices[i].v[c]))
+                        << "vertex " << i << " channel " << c << " at z = " << flat.vertices[i].z;
+            }
         }
     }
 }

@@ -16,11 +16,12 @@ DSM_NAMESPACE_BEGIN
 
 namespace {
 
-// A heap key ordering the inputs' next depths as (depth, input index): the
-// depth's float bits mapped to an unsigned order (-0 as +0, so that equal
-// depths give equal keys) above the index. Ties between inputs at one depth
-// are thus taken in input order, and the order of floating-point updates is
-// fixed; one integer comparison orders two events.
+// A key ordering events as (depth, index): the depth's float bits mapped to
+// an unsigned order (-0 as +0, so that equal depths give equal keys) above
+// the index of the input (in the heap) or of the event, numbered in input
+// order (in the flat path). Ties between inputs at one depth are thus taken
+// in input order, and the order of floating-point updates is fixed; one
+// integer comparison orders two events.
 std::uint64_t eventKey(float z, std::uint32_t input) {
     std::uint32_t bits = std::bit_cast<std::uint32_t>(z);
     if (bits == 0x80000000u) bits = 0;
@@ -51,6 +52,50 @@ void replaceTop(std::uint64_t* heap, std::size_t n, std::uint64_t moving) {
         i = parent;
     }
     heap[i] = moving;
+}
+
+// Sorts keys[0, n) into (depth, input) order: inputs whose steps are all
+// gathered in input order, each key (depth << 32 | event index), so that a
+// stable sort on the depth alone keeps ties in input order, the heap's order.
+// Small runs by insertion (keys are unique); longer ones by a stable radix
+// sort on the depth's bytes, least significant first, skipping bytes that
+// every key shares (depths within a pixel share their top byte or two). No
+// comparison that a processor could mispredict, unlike the heap's.
+void sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
+    constexpr std::size_t kInsertionLimit = 24;
+    if (n <= kInsertionLimit) {
+        for (std::size_t i = 1; i < n; ++i) {
+            const std::uint64_t key = keys[i];
+            std::size_t j = i;
+            for (; j > 0 && key < keys[j - 1]; --j) keys[j] = keys[j - 1];
+            keys[j] = key;
+        }
+        return;
+    }
+    std::uint32_t offsets[4][256] = {};
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::uint32_t depth = depthOf(keys[i]);
+        for (int b = 0; b < 4; ++b) ++offsets[b][(depth >> (8 * b)) & 255u];
+    }
+    std::uint64_t* from = keys;
+    std::uint64_t* to = scratch;
+    const std::uint32_t shared = depthOf(keys[0]);
+    for (int b = 0; b < 4; ++b) {
+        std::uint32_t* offset = offsets[b];
+        if (offset[(shared >> (8 * b)) & 255u] == n) continue;
+        std::uint32_t sum = 0;
+        for (std::uint32_t& o : offsets[b]) sum += std::exchange(o, sum);
+        const int shift = 32 + 8 * b;
+        for (std::size_t i = 0; i < n; ++i) to[offset[(from[i] >> shift) & 255u]++] = from[i];
+        std::swap(from, to);
+    }
+    if (from != keys) std::copy(from, from + n, keys);
+}
+
+// Out of line, so that the loops that check counts stay small enough to inline.
+[[noreturn, gnu::noinline, gnu::cold]] void throwCountLimit(std::uint64_t count, float z) {
+    throw Error(ErrorCode::limit,
+                detail::concat("sweep: ", count, " samples at depth ", z, " exceed the 2^32 - 1 a vertex holds"));
 }
 
 // The running slope sum carries rounding errors of up to 2^-53 times the
@@ -143,9 +188,7 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
             ++last;
             if (counts) count += counts[last];
         }
-        if (count > UINT32_MAX)
-            throw Error(ErrorCode::limit, detail::concat("sweep: ", count, " samples at depth ", depth,
-                                                         " exceed the 2^32 - 1 a vertex holds"));
+        if (count > UINT32_MAX) throwCountLimit(count, depth);
         const bool more = last + 1 < n;
         Step step{depth, static_cast<std::uint32_t>(count), 0u};
         double* valueChange = numbers + depths * 2 * NC;
@@ -181,6 +224,12 @@ struct Sweeper::Impl {
     std::vector<std::uint32_t> sloped;
     std::vector<std::uint32_t> slopedAt;
     std::vector<std::uint64_t> heap;  // a binary min-heap of eventKey()s: the next event on top
+    // Inputs of steps alone: every step as an eventKey() of its index, the
+    // step, and its change of value times the input's weight.
+    std::vector<std::uint64_t> eventKeys;
+    std::vector<std::uint64_t> eventScratch;
+    std::vector<SweepInput::Step> eventSteps;
+    std::vector<double> eventChanges;
     // The inputs given as functions or views, prepared here.
     std::vector<SweepInput> prepared;
     std::vector<const SweepInput*> preparedInputs;
@@ -232,7 +281,14 @@ struct Sweeper::Impl {
     // all be 0. The arithmetic on values is the same either way.
     template <class Sink>
     std::optional<float> dispatch(Span<const SweepInput* const> inputs, int channels, Sink& sink) {
-        const bool sloped = std::any_of(inputs.begin(), inputs.end(), [](const SweepInput* f) { return f->slopes(); });
+        bool sloped = false;
+        std::uint64_t events = 0;
+        for (const SweepInput* f : inputs) {
+            sloped = sloped || f->slopes();
+            events += f->size();
+        }
+        // The flat path numbers its events in 32 bits; the heap serves any input.
+        sloped = sloped || events > UINT32_MAX;
         if (channels == 1) return sloped ? run<1, true>(inputs, sink) : run<1, false>(inputs, sink);
         return sloped ? run<kMaxChannels, true>(inputs, sink) : run<kMaxChannels, false>(inputs, sink);
     }
@@ -313,25 +369,16 @@ template <std::size_t NC, bool Sloped, class Sink>
 std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Sink& sink) {
     const std::size_t n = inputs.size();
     constexpr std::size_t nc = NC;
-    next.assign(n, 0);
     // Inputs whose current segment slopes (in any channel of positive weight):
     // an exact recomputation of the slope sum only needs these, and when there
     // are none the sum is exactly 0. Kept in a list with swap-removal.
     sloped.clear();
-    slopedAt.assign(n, UINT32_MAX);
     // Inputs of positive weight whose current value is exactly 0, per channel:
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
     std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
     std::size_t positive = 0;
     for (std::size_t k = 0; k < n; ++k) positive += w[k] > 0.0;
-
-    // Inputs of weight 0 take part too: they add nothing to the value, but
-    // their depths and sample counts belong to the output.
-    heap.clear();
-    for (std::size_t k = 0; k < n; ++k)
-        if (!inputs[k]->empty()) heap.push_back(eventKey(inputs[k]->step(0).z, static_cast<std::uint32_t>(k)));
-    std::make_heap(heap.begin(), heap.end(), std::greater<>());  // a min-heap, laid out as replaceTop() reads it
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
@@ -340,66 +387,29 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
     double slopeMagnitude[kMaxChannels] = {0.0, 0.0, 0.0};  // through outSlope since it was exact
     double zCurrent = 0.0;
 
-    while (!heap.empty()) {
-        const std::uint32_t depth = depthOf(heap.front());
-        const float z = inputs[inputOf(heap.front())]->step(next[inputOf(heap.front())]).z;
+    // Three steps of the loops below, shared by the heap and the flat path
+    // (always inlined: called as functions they cost the flat path a tenth).
+    // The value just before depth z, where the next events are.
+    const auto arrive = [&](float z) __attribute__((always_inline)) {
         for (std::size_t c = 0; c < nc; ++c) {
             left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
             left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
             value[c] = left[c];
         }
         zCurrent = z;
-
-        std::uint64_t count = 0;
-        do {
-            const std::uint32_t k = inputOf(heap.front());
-            const SweepInput& f = *inputs[k];
-            const std::size_t i = next[k]++;
-            const SweepInput::Step& step = f.step(i);
-            const double* valueChange = f.changes(i);
-            const double wk = w[k];
-            count += step.count;
-            for (std::size_t c = 0; c < nc; ++c) value[c] += wk * valueChange[c];
-            if constexpr (Sloped) {
-                const double* slopeAfter = valueChange + nc;
-                // The slope before this depth: the one after the input's
-                // previous depth, 0 before its first.
-                const double* slopeBefore = i == 0 ? nullptr : f.changes(i - 1) + nc;
-                for (std::size_t c = 0; c < nc; ++c) {
-                    const double change = wk * (slopeAfter[c] - (slopeBefore ? slopeBefore[c] : 0.0));
-                    if (change != 0.0) {
-                        outSlope[c] += change;
-                        slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
-                    }
-                }
-            }
-            if (step.flags != 0 && wk > 0.0) {
-                for (std::size_t c = 0; c < nc; ++c) {
-                    if (step.flags & (SweepInput::kReachesZero << (2 * c)))
-                        ++zeroCount[c];
-                    else if (step.flags & (SweepInput::kLeavesZero << (2 * c)))
-                        --zeroCount[c];
-                }
-                if (step.flags & SweepInput::kStartsSloping) {
-                    slopedAt[k] = static_cast<std::uint32_t>(sloped.size());
-                    sloped.push_back(k);
-                } else if (step.flags & SweepInput::kStopsSloping) {
-                    const std::uint32_t moved = sloped.back();
-                    sloped[slopedAt[k]] = moved;
-                    slopedAt[moved] = slopedAt[k];
-                    sloped.pop_back();
-                    slopedAt[k] = UINT32_MAX;
-                }
-            }
-            if (i + 1 < f.size()) {
-                replaceTop(heap.data(), heap.size(), eventKey(f.step(i + 1).z, k));
-            } else {
-                const std::uint64_t last = heap.back();
-                heap.pop_back();
-                if (!heap.empty()) replaceTop(heap.data(), heap.size(), last);
-            }
-        } while (!heap.empty() && depthOf(heap.front()) == depth);
-
+    };
+    // The zero crossings of an input of positive weight at a step.
+    const auto countZeros = [&](std::uint32_t flags) __attribute__((always_inline)) {
+        for (std::size_t c = 0; c < nc; ++c) {
+            if (flags & (SweepInput::kReachesZero << (2 * c)))
+                ++zeroCount[c];
+            else if (flags & (SweepInput::kLeavesZero << (2 * c)))
+                --zeroCount[c];
+        }
+    };
+    // After every event at depth z: emits the vertex (two for a step); false
+    // when the sink refuses.
+    const auto leave = [&](float z, std::uint64_t count) __attribute__((always_inline)) {
         bool step = false;
         for (std::size_t c = 0; c < nc; ++c) {
             if (sloped.empty()) {
@@ -419,13 +429,121 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
             }
             if (value[c] != left[c]) step = true;
         }
-        if (count > UINT32_MAX)
-            throw Error(ErrorCode::limit, detail::concat("sweep: ", count, " samples at depth ", z,
-                                                         " exceed the 2^32 - 1 a vertex holds"));
+        if (count > UINT32_MAX) throwCountLimit(count, z);
         const std::uint32_t count32 = static_cast<std::uint32_t>(count);
-        if (!sink.push(z, left, step ? 0u : count32)) return z;
-        if (step && !sink.push(z, value, count32)) return z;
+        if (!sink.push(z, left, step ? 0u : count32)) return false;
+        if (step && !sink.push(z, value, count32)) return false;
         std::copy(value, value + nc, lastEmitted);
+        return true;
+    };
+
+    if constexpr (Sloped) {
+        // A heap of the inputs' next depths: a sloped input's slope before
+        // each depth is the one after its previous depth, so each input is
+        // walked in turn.
+        next.assign(n, 0);
+        slopedAt.assign(n, UINT32_MAX);
+        // Inputs of weight 0 take part too: they add nothing to the value,
+        // but their depths and sample counts belong to the output.
+        heap.clear();
+        for (std::size_t k = 0; k < n; ++k)
+            if (!inputs[k]->empty()) heap.push_back(eventKey(inputs[k]->step(0).z, static_cast<std::uint32_t>(k)));
+        std::make_heap(heap.begin(), heap.end(), std::greater<>());  // a min-heap, laid out as replaceTop() reads it
+
+        while (!heap.empty()) {
+            const std::uint32_t depth = depthOf(heap.front());
+            const float z = inputs[inputOf(heap.front())]->step(next[inputOf(heap.front())]).z;
+            arrive(z);
+            std::uint64_t count = 0;
+            do {
+                const std::uint32_t k = inputOf(heap.front());
+                const SweepInput& f = *inputs[k];
+                const std::size_t i = next[k]++;
+                const SweepInput::Step& step = f.step(i);
+                const double* valueChange = f.changes(i);
+                const double wk = w[k];
+                count += step.count;
+                for (std::size_t c = 0; c < nc; ++c) value[c] += wk * valueChange[c];
+                const double* slopeAfter = valueChange + nc;
+                // The slope before this depth: the one after the input's
+                // previous depth, 0 before its first.
+                const double* slopeBefore = i == 0 ? nullptr : f.changes(i - 1) + nc;
+                for (std::size_t c = 0; c < nc; ++c) {
+                    const double change = wk * (slopeAfter[c] - (slopeBefore ? slopeBefore[c] : 0.0));
+                    if (change != 0.0) {
+                        outSlope[c] += change;
+                        slopeMagnitude[c] += std::abs(change) + std::abs(outSlope[c]);
+                    }
+                }
+                if (step.flags != 0 && wk > 0.0) {
+                    countZeros(step.flags);
+                    if (step.flags & SweepInput::kStartsSloping) {
+                        slopedAt[k] = static_cast<std::uint32_t>(sloped.size());
+                        sloped.push_back(k);
+                    } else if (step.flags & SweepInput::kStopsSloping) {
+                        const std::uint32_t moved = sloped.back();
+                        sloped[slopedAt[k]] = moved;
+                        slopedAt[moved] = slopedAt[k];
+                        sloped.pop_back();
+                        slopedAt[k] = UINT32_MAX;
+                    }
+                }
+                if (i + 1 < f.size()) {
+                    replaceTop(heap.data(), heap.size(), eventKey(f.step(i + 1).z, k));
+                } else {
+                    const std::uint64_t last = heap.back();
+                    heap.pop_back();
+                    if (!heap.empty()) replaceTop(heap.data(), heap.size(), last);
+                }
+            } while (!heap.empty() && depthOf(heap.front()) == depth);
+            if (!leave(z, count)) return z;
+        }
+    } else {
+        // Steps alone: every input's steps gathered in input order, each with
+        // its weighted change of value, then sorted by depth (ties in input
+        // order, as the heap takes them) and summed in that order: the same
+        // operations in the same order as the heap's, without its
+        // unpredictable comparisons or a walk through the inputs per event.
+        std::size_t events = 0;
+        for (std::size_t k = 0; k < n; ++k) events += inputs[k]->size();
+        if (eventKeys.size() < events) {
+            eventKeys.resize(events);
+            eventScratch.resize(events);
+            eventSteps.resize(events);
+            eventChanges.resize(events * kMaxChannels);
+        }
+        std::uint64_t* keys = eventKeys.data();
+        SweepInput::Step* steps = eventSteps.data();
+        double* changes = eventChanges.data();
+        std::size_t e = 0;
+        for (std::size_t k = 0; k < n; ++k) {
+            const SweepInput& f = *inputs[k];
+            const double wk = w[k];
+            for (std::size_t i = 0; i < f.size(); ++i, ++e) {
+                SweepInput::Step step = f.step(i);
+                if (!(wk > 0.0)) step.flags = 0;  // only inputs of positive weight count towards 0
+                steps[e] = step;
+                const double* valueChange = f.changes(i);
+                for (std::size_t c = 0; c < nc; ++c) changes[e * nc + c] = wk * valueChange[c];
+                keys[e] = eventKey(step.z, static_cast<std::uint32_t>(e));
+            }
+        }
+        sortEvents(keys, eventScratch.data(), events);
+
+        for (e = 0; e < events;) {
+            const std::uint32_t depth = depthOf(keys[e]);
+            const float z = steps[inputOf(keys[e])].z;
+            arrive(z);
+            std::uint64_t count = 0;
+            do {
+                const std::uint32_t event = inputOf(keys[e]);
+                const SweepInput::Step& step = steps[event];
+                count += step.count;
+                for (std::size_t c = 0; c < nc; ++c) value[c] += changes[event * nc + c];
+                if (step.flags != 0) countZeros(step.flags);
+            } while (++e < events && depthOf(keys[e]) == depth);
+            if (!leave(z, count)) return z;
+        }
     }
     return std::nullopt;
 }
