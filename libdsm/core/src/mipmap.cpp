@@ -3,9 +3,6 @@
 #include <algorithm>
 #include <vector>
 
-#include "dsm/compressor.h"
-#include "dsm/sweep.h"
-
 DSM_NAMESPACE_BEGIN
 
 VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bool withCounts) {
@@ -28,8 +25,8 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
     return out;
 }
 
-VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
-                                    double tolerance, bool withCounts, bool centred) {
+VisibilityFunction FunctionAverager::average(std::span<const VisibilityView> children, std::span<const double> weights,
+                                             double tolerance, bool withCounts, bool centred) {
     int channels = 1;
     bool anyVertices = false;
     for (const VisibilityView& c : children) {
@@ -40,26 +37,48 @@ VisibilityFunction averageFunctions(std::span<const VisibilityView> children, st
     // A child of one layer with the channels wanted (and no counts to drop)
     // is its own light-centre function: it is swept as it is, the others
     // through a copy.
-    std::vector<VisibilityFunction> copies;
-    copies.reserve(children.size());  // no reallocation: the views of the copies stay valid
-    std::vector<VisibilityView> inputs;
-    inputs.reserve(children.size());
-    for (const VisibilityView& c : children) {
+    copies_.clear();
+    inputs_.clear();
+    if (prepared_.size() < children.size()) prepared_.resize(children.size());  // never shrunk: each keeps its storage
+    for (std::size_t k = 0; k < children.size(); ++k) {
+        const VisibilityView& c = children[k];
         if (c.layerCount() == 1 && c.channels() == channels && (withCounts || !c.hasCounts())) {
-            inputs.push_back(c);
+            prepared_[k].assign(c);
         } else {
-            copies.push_back(lightCentreFunction(c, channels, withCounts));
-            inputs.push_back(copies.back().view());
+            copies_.push_back(lightCentreFunction(c, channels, withCounts));
+            prepared_[k].assign(copies_.back().view());
         }
+        inputs_.push_back(&prepared_[k]);
     }
     CompressorOptions options;
     options.tolerance = tolerance;
     options.centred = centred;
     options.channels = channels;
     options.keepCounts = withCounts;
-    Compressor compressor(options);
-    Sweeper().sweep(Span<const VisibilityView>(inputs), weights, channels, compressor);
+    Compressor& compressor = compressorFor(options);
+    // The sweep's output is valid compressor input (depths in order, values
+    // in [0, 1] and never rising), taken as a run: the same result as
+    // pushing it vertex by vertex through the checks.
+    SweptVertices& swept = swept_[channels == 1 ? 0 : 1];
+    swept.clear();
+    sweeper_.sweep(Span<const SweepInput* const>(inputs_.data(), inputs_.size()),
+                   Span<const double>(weights.data(), weights.size()), channels, swept);
+    compressor.pushValid(swept.depths(), swept.values(), swept.counts(), swept.size());
     return compressor.finish();
+}
+
+Compressor& FunctionAverager::compressorFor(const CompressorOptions& options) {
+    for (auto& [kept, compressor] : compressors_)
+        if (kept.tolerance == options.tolerance && kept.centred == options.centred &&
+            kept.channels == options.channels && kept.keepCounts == options.keepCounts)
+            return *compressor;
+    compressors_.emplace_back(options, std::make_unique<Compressor>(options));
+    return *compressors_.back().second;
+}
+
+VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
+                                    double tolerance, bool withCounts, bool centred) {
+    return FunctionAverager().average(children, weights, tolerance, withCounts, centred);
 }
 
 DSM_NAMESPACE_END

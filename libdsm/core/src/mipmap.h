@@ -1,22 +1,41 @@
-// Building a coarser mip level: exact averages of 2 x 2 blocks of functions,
-// recompressed (Lokovic & Veach 2000, §5.3). Internal.
+// Coarser pixels from finer ones: the functions of the mip levels.
 #pragma once
 
+#include <memory>
 #include <span>
+#include <vector>
 
+#include "dsm/compressor.h"
+#include "dsm/sweep.h"
 #include "dsm/visibility.h"
 
 DSM_NAMESPACE_BEGIN
 
-/// The light-centre function of `f` as a single layer with `channels`
-/// channels (a monochrome function is repeated into RGB): layer 0, followed
-/// by a drop to 0 at its last depth when further layers exist, since all light
-/// is blocked there. Counts of layer 0 are kept when `withCounts`.
 VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bool withCounts);
 
-/// The weighted average of the light-centre functions of `children` (by the
-/// sweep), compressed with `tolerance`; monochrome when the children allow it.
-/// Counts add up when `withCounts`. Empty when every child is empty.
+/// Averages blocks of finer pixels into coarser ones: the children's
+/// light-centre functions swept with the weights, then compressed to the
+/// tolerance. Keeps its working memory (sweep, compressors) from call to call,
+/// so that a level's pixels allocate nothing but their results. Not
+/// thread-safe: one per thread.
+class FunctionAverager {
+public:
+    VisibilityFunction average(std::span<const VisibilityView> children, std::span<const double> weights,
+                               double tolerance, bool withCounts, bool centred = false);
+
+private:
+    Compressor& compressorFor(const CompressorOptions& options);
+
+    Sweeper sweeper_;
+    SweptVertices swept_[2] = {SweptVertices(1), SweptVertices(kMaxChannels)};
+    std::vector<VisibilityFunction> copies_;
+    std::vector<SweepInput> prepared_;
+    std::vector<const SweepInput*> inputs_;
+    // One compressor per set of options met (a level's tolerance, mono or RGB).
+    std::vector<std::pair<CompressorOptions, std::unique_ptr<Compressor>>> compressors_;
+};
+
+/// FunctionAverager::average() for one block.
 VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
                                     double tolerance, bool withCounts, bool centred = false);
 

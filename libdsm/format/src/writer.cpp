@@ -48,6 +48,7 @@ struct MapWriter::Impl {
     std::uint64_t offset = 0;
     std::vector<Level> levels;
     std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
+    FunctionAverager averager;  // the coarser levels' pixels
     bool finished = false;
 
     std::string where() const { return concat("'", path, "'"); }
@@ -146,7 +147,7 @@ struct MapWriter::Impl {
                         }
                     }
                 p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)] =
-                    averageFunctions(block, weights, tolerance, options.counts, options.centredCompression);
+                    averager.average(block, weights, tolerance, options.counts, options.centredCompression);
             }
         }
     }
