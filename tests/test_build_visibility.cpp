@@ -405,4 +405,46 @@ TEST(PixelBuilder, AllocatesOnlyItsResultOnceWarm) {
     EXPECT_GT(allocations([&] { return dsm::buildVisibility(many, manyWeights, o); }), 400u);
 }
 
+TEST(PixelBuilder, BuildingIntoFunctionsHandedBackAllocatesNothingOnceWarm) {
+    // The sampler's way: the rays' transmittances prepared for the sweep once,
+    // each pixel built into a function that held an earlier pixel, whose
+    // storage the builder keeps for the next. The results are build()'s, and
+    // once the functions have grown nothing is allocated, the second layer
+    // included. A function handed in with other channels, counts or layers is
+    // replaced whole.
+    const SurfaceHit hits[] = {hit(1.0f, 0.3f), hit(2.0f, 1.0f), hit(3.0f, 0.25f)};
+    const VolumeSample volume[] = {{0.5f, 0.2f}, {1.5f, 0.4f}, {2.5f, 0.1f}};
+    const std::vector<SampleRay> rays(100, SampleRay{hits, volume});
+    std::vector<double> weights(rays.size());
+    for (std::size_t k = 0; k < weights.size(); ++k) weights[k] = 1.0 + 0.01 * static_cast<double>(k);
+    const CompressorOptions o = options(0.01, 1, 2);
+    std::vector<dsm::SweepInput> prepared(rays.size());
+    std::vector<const dsm::SweepInput*> inputs;
+    for (std::size_t k = 0; k < rays.size(); ++k) {
+        prepared[k].assign(dsm::transmittance(rays[k], o.channels, o.keepCounts));
+        inputs.push_back(&prepared[k]);
+    }
+    dsm::PixelBuilder builder(o);
+    const VisibilityFunction expected = builder.build(inputs, rays, weights);
+    ASSERT_EQ(expected.layerCount(), 2u);
+
+    std::vector<VisibilityFunction> pixels(3, VisibilityFunction(3, false));
+    const float grey[3] = {0.5f, 0.5f, 0.5f};
+    for (VisibilityFunction& f : pixels) {
+        f.append(0.25f, grey);
+        f.beginLayer();
+        f.append(9.0f, grey);
+    }
+    for (int round = 0; round < 2; ++round)
+        for (VisibilityFunction& f : pixels) {
+            builder.build(inputs, rays, weights, f);
+            ASSERT_EQ(f, expected) << "round " << round;
+        }
+    const std::uint64_t before = allocationCount;
+    for (VisibilityFunction& f : pixels) builder.build(inputs, rays, weights, f);
+    EXPECT_EQ(allocationCount - before, 0u);
+    for (const VisibilityFunction& f : pixels) EXPECT_EQ(f, expected);
+    EXPECT_THROW(builder.build(inputs, std::span<const SampleRay>(rays.data(), 1), weights, pixels[0]), dsm::Error);
+}
+
 }  // namespace

@@ -281,6 +281,38 @@ TEST(Compressor, StreamingFloatAndDoublePushAgreeWithCompress) {
     EXPECT_LE(maxErrorAllChannels(f, viaFloat), 0.03 + kSlack);
 }
 
+TEST(Compressor, FinishingIntoFunctionsHandedBackGivesTheSameFunctions) {
+    // finish(out) hands the compressor out's storage for the next function;
+    // passing functions back in turn, whatever they held (other channels,
+    // counts, layers), gives exactly what finish() returns: grey and coloured
+    // RGB, one layer or two, counts.
+    std::mt19937_64 rng(54);
+    for (int channels : {1, 3}) {
+        CompressorOptions options;
+        options.tolerance = 0.02;
+        options.channels = channels;
+        options.keepCounts = true;
+        Compressor returning(options), into(options);
+        std::vector<VisibilityFunction> outputs(2, VisibilityFunction(channels == 1 ? 3 : 1, false));
+        for (int trial = 0; trial < 40; ++trial) {
+            const VisibilityFunction f = dsm::test::randomMonotone(rng, 50 + rng() % 200, channels, true);
+            VisibilityFunction& out = outputs[static_cast<std::size_t>(trial) % outputs.size()];
+            const std::size_t layerStart = trial % 2 ? f.size() / 3 : f.size();
+            for (std::size_t i = 0; i < f.size(); ++i) {
+                if (i == layerStart) {
+                    returning.beginLayer();
+                    into.beginLayer();
+                }
+                ASSERT_TRUE(returning.push(f.z(i), f.values(i), f.count(i)));
+                ASSERT_TRUE(into.push(f.z(i), f.values(i), f.count(i)));
+            }
+            const VisibilityFunction expected = returning.finish();
+            into.finish(out);
+            ASSERT_EQ(out, expected) << channels << " channels, trial " << trial;
+        }
+    }
+}
+
 TEST(Compressor, PushValidRunsAgreeWithPushPerVertex) {
     // The run path (float and double values, with and without counts) gives
     // the same function as push() vertex by vertex, whether the run is whole

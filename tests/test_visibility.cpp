@@ -69,6 +69,22 @@ TEST(VisibilityFunction, EmptyFunctionIsOneEverywhere) {
     EXPECT_TRUE(f.empty());
 }
 
+TEST(VisibilityFunction, ResetEmptiesAndSetsChannelsAndCounts) {
+    VisibilityFunction f(3, true);
+    const float v[3] = {0.5f, 0.25f, 0.125f};
+    f.append(1.0f, v, 4);
+    f.beginLayer();
+    f.append(2.0f, v, 1);
+    f.reset(1, false);
+    EXPECT_EQ(f, VisibilityFunction(1, false));
+    f.append(3.0f, 0.5f, 7);
+    EXPECT_EQ(f.count(0), 0u);
+    EXPECT_EQ(f.layerCount(), 1u);
+    f.reset(3, true);
+    EXPECT_EQ(f, VisibilityFunction(3, true));
+    EXPECT_THROW(f.reset(2, true), dsm::Error);
+}
+
 TEST(VisibilityFunction, OneBeforeFirstVertex) {
     const VisibilityFunction f = mono({{2.0f, 0.8f}, {3.0f, 0.4f}});
     EXPECT_EQ(f.evaluate(0.0), 1.0);

@@ -446,7 +446,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                     VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
                     if (ws.rays.empty()) continue;  // a filter too narrow to catch a sample
                     try {
-                        f = ws.pixel.build(ws.inputs, ws.rays, ws.weights, &stats.timings);
+                        ws.pixel.build(ws.inputs, ws.rays, ws.weights, f, &stats.timings);
                     } catch (const Error& e) {
                         throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                     }

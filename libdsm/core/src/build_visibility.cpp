@@ -16,6 +16,11 @@ namespace {
 using Clock = std::chrono::steady_clock;
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
+void checkOnePerRay(std::size_t transmittances, std::size_t rays) {
+    if (transmittances != rays)
+        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances, " transmittances but ", rays, " rays"));
+}
+
 }  // namespace
 
 struct PixelBuilder::Impl {
@@ -47,8 +52,8 @@ struct PixelBuilder::Impl {
         }
     }
 
-    VisibilityFunction run(Span<const SweepInput* const> first, Span<const SampleRay> rays, Span<const double> weights,
-                           PixelTimings* timings) {
+    void run(Span<const SweepInput* const> first, Span<const SampleRay> rays, Span<const double> weights,
+             VisibilityFunction& out, PixelTimings* timings) {
         // An error may have left the compressor inside a function: drop that.
         if (compressorInUse) compressor.finish();
         compressorInUse = true;
@@ -75,9 +80,15 @@ struct PixelBuilder::Impl {
             layerInputs = inputs;
         }
         const auto start = Clock::now();
-        VisibilityFunction result = compressor.finish();
+        compressor.finish(out);
         compressorInUse = false;
         if (timings) timings->compressionSeconds += since(start);
+    }
+
+    VisibilityFunction run(Span<const SweepInput* const> first, Span<const SampleRay> rays, Span<const double> weights,
+                           PixelTimings* timings) {
+        VisibilityFunction result;
+        run(first, rays, weights, result, timings);
         return result;
     }
 
@@ -108,19 +119,22 @@ VisibilityFunction PixelBuilder::build(Span<const SampleRay> rays, Span<const do
 
 VisibilityFunction PixelBuilder::build(Span<const VisibilityView> transmittances, Span<const SampleRay> rays,
                                        Span<const double> weights, PixelTimings* timings) {
-    if (transmittances.size() != rays.size())
-        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",
-                                                        rays.size(), " rays"));
+    checkOnePerRay(transmittances.size(), rays.size());
     impl_->prepare(transmittances);
     return impl_->run(impl_->inputs, rays, weights, timings);
 }
 
 VisibilityFunction PixelBuilder::build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays,
                                        Span<const double> weights, PixelTimings* timings) {
-    if (transmittances.size() != rays.size())
-        throw Error(ErrorCode::argument, detail::concat("pixel: ", transmittances.size(), " transmittances but ",
-                                                        rays.size(), " rays"));
-    return impl_->run(transmittances, rays, weights, timings);
+    VisibilityFunction result;
+    build(transmittances, rays, weights, result, timings);
+    return result;
+}
+
+void PixelBuilder::build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays,
+                         Span<const double> weights, VisibilityFunction& out, PixelTimings* timings) {
+    checkOnePerRay(transmittances.size(), rays.size());
+    impl_->run(transmittances, rays, weights, out, timings);
 }
 
 VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<const double> weights,

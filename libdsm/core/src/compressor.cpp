@@ -104,6 +104,7 @@ public:
     Greedy(int channels, double tolerance, bool keepCounts, bool centred)
         : channels_(channels),
           centred_(centred),
+          keepCounts_(keepCounts),
           // Leave room for the float rounding of segment end points, so that the
           // stored function, not just the ideal line, is within tolerance.
           band_(std::max(0.0, tolerance - 2.0 * kStoreRounding)),
@@ -301,16 +302,19 @@ public:
         pending_.clear();
     }
 
-    VisibilityFunction take(int channels) {
-        VisibilityFunction result = std::move(out_);
+    // Hands the output to `result`, keeping `result`'s storage for the next
+    // function; restart() follows.
+    void take(VisibilityFunction& result) { std::swap(result, out_); }
+
+    // Starts the next function, of `channels` channels.
+    void restart(int channels) {
         channels_ = channels;
-        out_ = VisibilityFunction(channels, result.hasCounts());
+        out_.reset(channels, keepCounts_);
         started_ = false;
         open_ = false;
         balancedPoint_.valid = false;
         pending_.clear();
         toReplay_.clear();
-        return result;
     }
 
 private:
@@ -572,6 +576,7 @@ private:
 
     int channels_;
     bool centred_;
+    bool keepCounts_;
     double band_;
     VisibilityFunction out_;
 
@@ -617,7 +622,7 @@ struct Compressor::Impl {
 
     void reset() {
         grey = greyAtStart(options);
-        greedy.take(grey ? 1 : options.channels);
+        greedy.restart(grey ? 1 : options.channels);
         resetsLeft = std::max(options.maxLayers, 1) - 1;
         layerEnding = false;
         layerClosed = false;
@@ -820,13 +825,18 @@ float Compressor::layerEndDepth() const { return impl_->layerEndZ; }
 int Compressor::layersUsed() const { return impl_->layers; }
 
 VisibilityFunction Compressor::finish() {
+    VisibilityFunction result;
+    finish(result);
+    return result;
+}
+
+void Compressor::finish(VisibilityFunction& out) {
     Impl& s = *impl_;
     // A layer after the first keeps at least one vertex even when its input
     // stayed at V = 1 within tolerance: an empty last layer is not valid.
     if (!s.layerClosed) s.endLayer(s.layerEnding || s.layers > 1);
-    VisibilityFunction result = s.greedy.take(s.greedy.channels());
+    s.greedy.take(out);
     s.reset();
-    return result;
 }
 
 VisibilityFunction compress(const VisibilityFunction& input, double tolerance, bool allowMonochrome) {

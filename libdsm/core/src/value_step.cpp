@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <vector>
 
 DSM_NAMESPACE_BEGIN
 
@@ -31,9 +30,15 @@ double compressorTolerance(double tolerance) { return tolerance - 0.5 * valueSte
 
 VisibilityFunction roundValues(const VisibilityView& f, double step) {
     VisibilityFunction out(f.channels(), f.hasCounts());
-    if (f.empty()) return out;
+    roundValues(f, step, out);
+    return out;
+}
+
+void roundValues(const VisibilityView& f, double step, VisibilityFunction& out) {
+    out.reset(f.channels(), f.hasCounts());
+    if (f.empty()) return;
     const int channels = f.channels();
-    std::vector<float> values(static_cast<std::size_t>(channels));
+    float values[kMaxChannels];
     out.reserve(f.size());
     std::size_t nextLayer = 1;
     for (std::size_t i = 0; i < f.size(); ++i) {
@@ -43,12 +48,11 @@ VisibilityFunction roundValues(const VisibilityView& f, double step) {
         }
         for (int c = 0; c < channels; ++c) {
             const float v = f.value(i, c);
-            values[static_cast<std::size_t>(c)] =
+            values[c] =
                 step > 0.0 ? static_cast<float>(std::round(static_cast<double>(v) / step) * step) : v;
         }
-        out.append(f.z(i), values.data(), f.count(i));
+        out.append(f.z(i), values, f.count(i));
     }
-    return out;
 }
 
 DSM_NAMESPACE_END

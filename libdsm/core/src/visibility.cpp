@@ -12,11 +12,19 @@ DSM_NAMESPACE_BEGIN
 
 using detail::lerpSegment;
 
-VisibilityFunction::VisibilityFunction(int channels, bool withCounts)
-    : channels_(channels), withCounts_(withCounts) {
+namespace {
+
+void checkChannelCount(int channels) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument,
                     detail::concat("visibility function: channel count ", channels, " is not 1 or 3"));
+}
+
+}  // namespace
+
+VisibilityFunction::VisibilityFunction(int channels, bool withCounts)
+    : channels_(channels), withCounts_(withCounts) {
+    checkChannelCount(channels);
 }
 
 std::uint64_t VisibilityFunction::totalCount() const {
@@ -61,6 +69,13 @@ void VisibilityFunction::clear() {
     v_.clear();
     count_.clear();
     layerBegin_.clear();
+}
+
+void VisibilityFunction::reset(int channels, bool withCounts) {
+    checkChannelCount(channels);
+    clear();
+    channels_ = channels;
+    withCounts_ = withCounts;
 }
 
 double VisibilityFunction::evaluate(double z, int channel) const { return view().evaluate(z, channel); }

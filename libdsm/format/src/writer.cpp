@@ -5,6 +5,7 @@
 #include <cmath>
 #include <map>
 #include <memory>
+#include <utility>
 #include <vector>
 
 #include "dsm/error.h"
@@ -49,6 +50,7 @@ struct MapWriter::Impl {
     std::vector<Level> levels;
     std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
     FunctionAverager averager;  // the coarser levels' pixels
+    VisibilityFunction rounded;  // a pixel with its values rounded to the level's step
     bool finished = false;
 
     std::string where() const { return concat("'", path, "'"); }
@@ -72,7 +74,10 @@ struct MapWriter::Impl {
                                         L.info.valueStep, options.codec};
         if (L.info.valueStep > 0.0)
             for (VisibilityFunction& f : pixels)
-                if (!f.empty()) f = roundValues(f, L.info.valueStep);
+                if (!f.empty()) {
+                    roundValues(f, L.info.valueStep, rounded);
+                    std::swap(f, rounded);  // `rounded` keeps f's storage for the next pixel
+                }
         format::EncodedTile encoded =
             pixels.empty() ? format::EncodedTile{} : format::encodeTile(pixels, layout, codecLevel(options));
         if (!encoded.stored.empty()) {

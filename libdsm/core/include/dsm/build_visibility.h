@@ -41,7 +41,8 @@ DSM_API VisibilityFunction buildVisibility(Span<const SampleRay> rays, Span<cons
 /// buildVisibility() with its working memory (transmittances, the sweep's
 /// state and output, the compressor) kept between pixels, for a caller that
 /// builds many pixels with one set of options on one thread: once its buffers
-/// have grown to the largest pixel, a pixel allocates only its result. Not
+/// have grown to the largest pixel, a pixel allocates only its result, and
+/// nothing when built into a function handed back pixel after pixel. Not
 /// thread-safe: one per thread.
 class DSM_API PixelBuilder {
 public:
@@ -67,6 +68,14 @@ public:
     /// pixels is read once.
     VisibilityFunction build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays,
                              Span<const double> weights, PixelTimings* timings = nullptr);
+
+    /// The same into `out` (its previous contents dropped), whose storage the
+    /// builder keeps for the next pixel (Compressor::finish(VisibilityFunction&)):
+    /// a caller that builds into the same functions again, as a sampler
+    /// rebuilding a tile's pixels tile after tile, allocates nothing per pixel
+    /// once they have grown. On an error `out` is left empty or as it was.
+    void build(Span<const SweepInput* const> transmittances, Span<const SampleRay> rays, Span<const double> weights,
+               VisibilityFunction& out, PixelTimings* timings = nullptr);
 
 private:
     struct Impl;

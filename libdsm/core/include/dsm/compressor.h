@@ -99,6 +99,10 @@ public:
     /// Closes the last segment and returns the compressed function. The
     /// compressor is then reset and may be reused.
     VisibilityFunction finish();
+    /// finish() into `out`, whose storage the compressor keeps for the next
+    /// function: a caller that hands the same functions back (a tile's pixels
+    /// rebuilt tile after tile) allocates nothing once they have grown.
+    void finish(VisibilityFunction& out);
 
 private:
     struct Impl;

@@ -26,4 +26,9 @@ DSM_API double compressorTolerance(double tolerance);
 /// never makes a non-increasing layer increase.
 DSM_API VisibilityFunction roundValues(const VisibilityView& f, double step);
 
+/// roundValues() into `out`, whose contents it replaces and whose storage it
+/// keeps (no allocation while it has room). `out` must not be the function
+/// `f` views.
+DSM_API void roundValues(const VisibilityView& f, double step, VisibilityFunction& out);
+
 DSM_NAMESPACE_END

@@ -160,6 +160,10 @@ public:
     void addToLastCount(std::uint64_t count);
     void reserve(std::size_t vertices);
     void clear();
+    /// Empties the function and gives it `channels` (1 or 3; dsm::Error
+    /// (argument) otherwise) and counts or none, keeping its storage: refilling
+    /// a function allocates nothing while it has room.
+    void reset(int channels, bool withCounts);
 
     /// Light-centre visibility at depth z for one channel (0 <= channel <
     /// channels()), by binary search. Computed in double from the stored floats.
