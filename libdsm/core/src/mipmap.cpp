@@ -25,15 +25,18 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
     return out;
 }
 
-VisibilityFunction FunctionAverager::average(std::span<const VisibilityView> children, std::span<const double> weights,
-                                             double tolerance, bool withCounts, bool centred) {
+void FunctionAverager::average(std::span<const VisibilityView> children, std::span<const double> weights,
+                               double tolerance, bool withCounts, bool centred, VisibilityFunction& out) {
     int channels = 1;
     bool anyVertices = false;
     for (const VisibilityView& c : children) {
         channels = std::max(channels, c.channels());
         anyVertices = anyVertices || !c.empty();
     }
-    if (!anyVertices) return VisibilityFunction(1, withCounts);
+    if (!anyVertices) {
+        out.reset(1, withCounts);
+        return;
+    }
     // A child of one layer with the channels wanted (and no counts to drop)
     // is its own light-centre function: it is swept as it is, the others
     // through a copy.
@@ -64,7 +67,7 @@ VisibilityFunction FunctionAverager::average(std::span<const VisibilityView> chi
     sweeper_.sweep(Span<const SweepInput* const>(inputs_.data(), inputs_.size()),
                    Span<const double>(weights.data(), weights.size()), channels, swept);
     compressor.pushValid(swept.depths(), swept.values(), swept.counts(), swept.size());
-    return compressor.finish();
+    compressor.finish(out);
 }
 
 Compressor& FunctionAverager::compressorFor(const CompressorOptions& options) {
@@ -78,7 +81,9 @@ Compressor& FunctionAverager::compressorFor(const CompressorOptions& options) {
 
 VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
                                     double tolerance, bool withCounts, bool centred) {
-    return FunctionAverager().average(children, weights, tolerance, withCounts, centred);
+    VisibilityFunction result;
+    FunctionAverager().average(children, weights, tolerance, withCounts, centred, result);
+    return result;
 }
 
 DSM_NAMESPACE_END

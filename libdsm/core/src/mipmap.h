@@ -15,13 +15,15 @@ VisibilityFunction lightCentreFunction(const VisibilityView& f, int channels, bo
 
 /// Averages blocks of finer pixels into coarser ones: the children's
 /// light-centre functions swept with the weights, then compressed to the
-/// tolerance. Keeps its working memory (sweep, compressors) from call to call,
-/// so that a level's pixels allocate nothing but their results. Not
-/// thread-safe: one per thread.
+/// tolerance into `out` (Compressor::finish(VisibilityFunction&): out's
+/// storage is kept for the next). Keeps its working memory (sweep,
+/// compressors) from call to call, so that averaging into functions handed
+/// back allocates nothing once they have grown. Not thread-safe: one per
+/// thread.
 class FunctionAverager {
 public:
-    VisibilityFunction average(std::span<const VisibilityView> children, std::span<const double> weights,
-                               double tolerance, bool withCounts, bool centred = false);
+    void average(std::span<const VisibilityView> children, std::span<const double> weights, double tolerance,
+                 bool withCounts, bool centred, VisibilityFunction& out);
 
 private:
     Compressor& compressorFor(const CompressorOptions& options);
@@ -35,7 +37,7 @@ private:
     std::vector<std::pair<CompressorOptions, std::unique_ptr<Compressor>>> compressors_;
 };
 
-/// FunctionAverager::average() for one block.
+/// FunctionAverager::average() of one block.
 VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
                                     double tolerance, bool withCounts, bool centred = false);
 

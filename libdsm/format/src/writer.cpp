@@ -51,6 +51,10 @@ struct MapWriter::Impl {
     std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
     FunctionAverager averager;  // the coarser levels' pixels
     VisibilityFunction rounded;  // a pixel with its values rounded to the level's step
+    std::vector<VisibilityFunction> level0Copy;  // the level-0 tile being written
+    // Coarser tiles written, kept for their functions' storage: the next
+    // pending tile is averaged into them.
+    std::vector<std::vector<VisibilityFunction>> spareTiles;
     bool finished = false;
 
     std::string where() const { return concat("'", path, "'"); }
@@ -110,6 +114,7 @@ struct MapWriter::Impl {
             std::vector<VisibilityFunction> done = std::move(p.pixels);
             pending[level + 1].erase(parentIndex);
             acceptTile(level + 1, ptx, pty, done);
+            spareTiles.push_back(std::move(done));
         }
     }
 
@@ -121,7 +126,13 @@ struct MapWriter::Impl {
         const std::uint32_t T = options.tileSize;
         const std::uint32_t ptx = tx / 2, pty = ty / 2;
         const std::uint32_t pw = tileExtent(parent.info.width, ptx), ph = tileExtent(parent.info.height, pty);
-        if (p.pixels.empty()) p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
+        if (p.pixels.empty()) {
+            if (!spareTiles.empty()) {
+                p.pixels = std::move(spareTiles.back());
+                spareTiles.pop_back();
+            }
+            p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
+        }
 
         const std::uint32_t cw = tileExtent(child.info.width, tx);
         const std::uint32_t x0 = tx * T, y0 = ty * T;  // child tile origin (child level pixels)
@@ -151,8 +162,8 @@ struct MapWriter::Impl {
                             weights.push_back(covered(cx, options.width) * covered(cy, options.height));
                         }
                     }
-                p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)] =
-                    averager.average(block, weights, tolerance, options.counts, options.centredCompression);
+                averager.average(block, weights, tolerance, options.counts, options.centredCompression,
+                                 p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)]);
             }
         }
     }
@@ -273,7 +284,10 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const Visibil
         }
     }
     const bool allEmpty = std::all_of(pixels.begin(), pixels.end(), [](const VisibilityFunction& f) { return f.empty(); });
-    std::vector<VisibilityFunction> copy;
+    // The writer rounds its own copy; copied into the functions of the tile
+    // before, so that a copy allocates nothing once they have grown.
+    std::vector<VisibilityFunction> none;
+    std::vector<VisibilityFunction>& copy = allEmpty ? none : s.level0Copy;
     if (!allEmpty) copy.assign(pixels.begin(), pixels.end());
     s.acceptTile(0, tx, ty, copy);
 } catch (const Error& e) {
