@@ -97,7 +97,7 @@ struct TileWorkspace {
     // sample.
     std::vector<SweepInput> transmittances;
     std::vector<unsigned char> built;
-    // One pixel's inputs.
+    // One pixel's inputs, the first of each in use (sized for the largest).
     std::vector<SampleRay> rays;
     std::vector<const SweepInput*> inputs;
     std::vector<double> weights;
@@ -410,13 +410,18 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 }
             if (ws.transmittances.size() < sampleCount) ws.transmittances.resize(sampleCount);
             ws.built.assign(sampleCount, 0);
+            // Room for a pixel's inputs: every sample its filter's square reaches.
+            const std::size_t footprint = std::size_t(2 * reach + 1) * (2 * reach + 1) * spp;
+            if (ws.rays.size() < footprint) {
+                ws.rays.resize(footprint);
+                ws.inputs.resize(footprint);
+                ws.weights.resize(footprint);
+            }
             constexpr float kFromTheStart = -std::numeric_limits<float>::infinity();
             for (std::uint32_t y = by0; y < by1; ++y)
                 for (std::uint32_t x = rx0; x < rx1; ++x) {
                     const auto start = Clock::now();
-                    ws.rays.clear();
-                    ws.inputs.clear();
-                    ws.weights.clear();
+                    std::size_t used = 0;  // the pixel's inputs so far
                     const double cx = x + 0.5, cy = y + 0.5;
                     for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
                         for (std::uint32_t nx = (x >= std::uint32_t(reach) ? x - reach : 0); nx < std::min(x + reach + 1, W);
@@ -426,27 +431,34 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                                 const SampleData& s = samples[i];
                                 const double wgt = filterWeight(filter, radius, s.x - cx, s.y - cy);
                                 if (wgt <= 0.0) continue;
-                                const SampleRay ray{ws.hitsOf(s), s.volume};
+                                // The ray's fields stored where they go: a copy of a
+                                // ray assembled on the stack read it back whole before
+                                // its halves had been written (a stalled store).
+                                SampleRay& ray = ws.rays[used];
+                                ray.hits = ws.hitsOf(s);
+                                ray.volume = s.volume;
                                 if (!ws.built[i]) {
                                     try {
                                         ws.transmittance.build(ray, channels, counts, kFromTheStart,
                                                                ws.transmittances[i]);
                                     } catch (const Error& e) {
-                                        throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ",
-                                                                     ws.rays.size(), ": ", e.what()));
+                                        throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ", used,
+                                                                     ": ", e.what()));
                                     }
                                     ws.built[i] = 1;
                                 }
-                                ws.rays.push_back(ray);
-                                ws.inputs.push_back(&ws.transmittances[i]);
-                                ws.weights.push_back(wgt);
+                                ws.inputs[used] = &ws.transmittances[i];
+                                ws.weights[used] = wgt;
+                                ++used;
                             }
                         }
                     stats.timings.transmittanceSeconds += since(start);
                     VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
-                    if (ws.rays.empty()) continue;  // a filter too narrow to catch a sample
+                    if (used == 0) continue;  // a filter too narrow to catch a sample
                     try {
-                        ws.pixel.build(ws.inputs, ws.rays, ws.weights, f, &stats.timings);
+                        ws.pixel.build(Span<const SweepInput* const>(ws.inputs.data(), used),
+                                       Span<const SampleRay>(ws.rays.data(), used),
+                                       Span<const double>(ws.weights.data(), used), f, &stats.timings);
                     } catch (const Error& e) {
                         throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                     }
