@@ -58,31 +58,35 @@ struct PixelBuilder::Impl {
         if (compressorInUse) compressor.finish();
         compressorInUse = true;
         Span<const SweepInput* const> layerInputs = first;
+        // One clock reading per boundary between stages (each reading is a
+        // percent or two of a build's time).
+        Clock::time_point mark = timings ? Clock::now() : Clock::time_point{};
+        const auto lap = [&](double& seconds) {
+            const Clock::time_point now = Clock::now();
+            seconds += std::chrono::duration<double>(now - mark).count();
+            mark = now;
+        };
         for (;;) {
             if (timings)
                 for (const SweepInput* tau : layerInputs) timings->transmittanceVertices += tau->vertexCount();
-            auto start = Clock::now();
             swept.clear();
             sweeper.sweep(layerInputs, weights, options.channels, swept);
-            if (timings) {
-                timings->sweepSeconds += since(start);
-                start = Clock::now();
-            }
+            if (timings) lap(timings->sweepSeconds);
             // The sweep's output is valid input: the compressor takes it
             // until it refuses a vertex (a layer ended).
             const bool complete =
                 compressor.pushValid(swept.depths(), swept.values(), swept.counts(), swept.size()) == swept.size();
-            if (timings) timings->compressionSeconds += since(start);
             if (complete) break;
+            if (timings) lap(timings->compressionSeconds);
             // The compressor ended a layer: everything up to its depth is in
             // it; the next layer sees what lies beyond.
             buildTransmittances(rays, compressor.layerEndDepth(), timings);
+            if (timings) mark = Clock::now();
             layerInputs = inputs;
         }
-        const auto start = Clock::now();
         compressor.finish(out);
         compressorInUse = false;
-        if (timings) timings->compressionSeconds += since(start);
+        if (timings) lap(timings->compressionSeconds);
     }
 
     VisibilityFunction run(Span<const SweepInput* const> first, Span<const SampleRay> rays, Span<const double> weights,
