@@ -300,7 +300,10 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
                         Vec3 origin, direction;
                         frame_.rayAt(sxs[k], sys[k], origin, direction);
                         surfaces_.intersect(primitive, origin, direction, samples[k].time, tMin, out.found);
-                        out.foundSample.resize(out.found.size(), static_cast<std::uint32_t>(k));
+                        // A primitive yields at most two crossings: pushed, not resized
+                        // (a call for a fill of 0, 1 or 2).
+                        while (out.foundSample.size() < out.found.size())
+                            out.foundSample.push_back(static_cast<std::uint32_t>(k));
                     }
                 }
             }
