@@ -54,14 +54,38 @@ void replaceTop(std::uint64_t* heap, std::size_t n, std::uint64_t moving) {
     heap[i] = moving;
 }
 
-// Sorts keys[0, n) into (depth, input) order: inputs whose steps are all
-// gathered in input order, each key (depth << 32 | event index), so that a
-// stable sort on the depth alone keeps ties in input order, the heap's order.
-// Small runs by insertion (keys are unique); longer ones by a stable radix
-// sort on the depth's bytes, least significant first, skipping bytes that
-// every key shares (depths within a pixel share their top byte or two). No
-// comparison that a processor could mispredict, unlike the heap's.
-void sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
+// One stable radix pass per byte of the depth, bytes [0, Passes), least
+// significant first, from `keys` through `scratch`: returns where the
+// sorted keys are.
+template <int Passes>
+std::uint64_t* radixSortByDepth(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
+    std::uint32_t offsets[Passes][256] = {};
+    for (std::size_t i = 0; i < n; ++i) {
+        const std::uint32_t depth = depthOf(keys[i]);
+        for (int b = 0; b < Passes; ++b) ++offsets[b][(depth >> (8 * b)) & 255u];
+    }
+    std::uint64_t* from = keys;
+    std::uint64_t* to = scratch;
+    for (int b = 0; b < Passes; ++b) {
+        std::uint32_t* offset = offsets[b];
+        std::uint32_t sum = 0;
+        for (int d = 0; d < 256; ++d) sum += std::exchange(offset[d], sum);
+        const int shift = 32 + 8 * b;
+        for (std::size_t i = 0; i < n; ++i) to[offset[(from[i] >> shift) & 255u]++] = from[i];
+        std::swap(from, to);
+    }
+    return from;
+}
+
+// Sorts keys[0, n) into (depth, input) order and returns where they are
+// (keys or scratch, room for n each): inputs whose steps are all gathered in
+// input order, each key (depth << 32 | event index), so that a stable sort
+// on the depth alone keeps ties in input order, the heap's order. Small runs
+// by insertion (keys are unique); longer ones by a stable radix sort on the
+// depth's bytes up to the highest in which two keys differ (depths within a
+// pixel share their top byte or two). No comparison that a processor could
+// mispredict, unlike the heap's.
+std::uint64_t* sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
     constexpr std::size_t kInsertionLimit = 24;
     if (n <= kInsertionLimit) {
         for (std::size_t i = 1; i < n; ++i) {
@@ -70,26 +94,18 @@ void sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
             for (; j > 0 && key < keys[j - 1]; --j) keys[j] = keys[j - 1];
             keys[j] = key;
         }
-        return;
+        return keys;
     }
-    std::uint32_t offsets[4][256] = {};
-    for (std::size_t i = 0; i < n; ++i) {
-        const std::uint32_t depth = depthOf(keys[i]);
-        for (int b = 0; b < 4; ++b) ++offsets[b][(depth >> (8 * b)) & 255u];
+    const std::uint32_t first = depthOf(keys[0]);
+    std::uint32_t differ = 0;
+    for (std::size_t i = 1; i < n; ++i) differ |= depthOf(keys[i]) ^ first;
+    switch ((std::bit_width(differ) + 7) / 8) {
+        case 0: return keys;  // one depth: in input order already
+        case 1: return radixSortByDepth<1>(keys, scratch, n);
+        case 2: return radixSortByDepth<2>(keys, scratch, n);
+        case 3: return radixSortByDepth<3>(keys, scratch, n);
+        default: return radixSortByDepth<4>(keys, scratch, n);
     }
-    std::uint64_t* from = keys;
-    std::uint64_t* to = scratch;
-    const std::uint32_t shared = depthOf(keys[0]);
-    for (int b = 0; b < 4; ++b) {
-        std::uint32_t* offset = offsets[b];
-        if (offset[(shared >> (8 * b)) & 255u] == n) continue;
-        std::uint32_t sum = 0;
-        for (std::uint32_t& o : offsets[b]) sum += std::exchange(o, sum);
-        const int shift = 32 + 8 * b;
-        for (std::size_t i = 0; i < n; ++i) to[offset[(from[i] >> shift) & 255u]++] = from[i];
-        std::swap(from, to);
-    }
-    if (from != keys) std::copy(from, from + n, keys);
 }
 
 // Out of line, so that the loops that check counts stay small enough to inline.
@@ -528,7 +544,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
                 keys[e] = eventKey(step.z, static_cast<std::uint32_t>(e));
             }
         }
-        sortEvents(keys, eventScratch.data(), events);
+        keys = sortEvents(keys, eventScratch.data(), events);
 
         for (e = 0; e < events;) {
             const std::uint32_t depth = depthOf(keys[e]);
