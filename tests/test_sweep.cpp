@@ -184,15 +184,23 @@ TEST(Sweep, InputsOfStepsAloneSumInTheHeapsOrderBitForBit) {
     for (int channels : {1, 3}) {
         for (int trial = 0; trial < 60; ++trial) {
             // From a handful of events (sorted by insertion) to hundreds
-            // (radix), depths tied on a grid or spread over 2^-6 .. 2^6 (the
-            // radix passes over bytes that differ), some weights 0.
+            // (radix), depths tied on a grid, spread over 2^-6 .. 2^6, all one
+            // depth, or a few ulps apart (the radix passes over 4 down to 0
+            // bytes), some weights 0.
             const std::size_t functions = 1 + rng() % (trial % 3 == 0 ? 6 : 120);
             std::vector<VisibilityFunction> inputs;
             std::vector<double> weights;
             for (std::size_t k = 0; k < functions; ++k) {
                 std::vector<dsm::SurfaceHit> hits(rng() % 6);
                 for (dsm::SurfaceHit& h : hits) {
-                    h.z = trial % 2 ? std::round(8.0f * unit(rng)) / 4.0f : std::exp2(exponent(rng));
+                    switch (trial % 4) {
+                        case 0: h.z = std::round(8.0f * unit(rng)) / 4.0f; break;
+                        case 1: h.z = std::exp2(exponent(rng)); break;
+                        case 2: h.z = 3.0f; break;  // one depth: nothing to sort
+                        default:  // within 200 ulps: the keys differ in their low byte alone
+                            h.z = std::bit_cast<float>(std::bit_cast<std::uint32_t>(3.0f) +
+                                                       static_cast<std::uint32_t>(rng() % 200));
+                    }
                     for (float& o : h.opacity) o = unit(rng) < 0.1f ? 1.0f : unit(rng);
                 }
                 inputs.push_back(dsm::transmittance(dsm::SampleRay{hits, {}}, channels, true));
