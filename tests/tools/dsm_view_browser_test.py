@@ -103,7 +103,10 @@ class Browser(Process):
                           "--disable-dev-shm-usage", "--no-first-run", "--no-default-browser-check",
                           "--remote-debugging-address=127.0.0.1", "--remote-debugging-port=0",
                           f"--user-data-dir={self.profile}", "--window-size=1400,900",
-                          "--force-device-scale-factor=1", "about:blank"])
+                          "--force-device-scale-factor=1", "about:blank"],
+                         # Its singleton socket directory goes to TMPDIR: inside
+                         # the test's directory, removed with it.
+                         env={**os.environ, "TMPDIR": work})
         port_file = os.path.join(self.profile, "DevToolsActivePort")
         deadline = time.monotonic() + TIMEOUT
         while not os.path.exists(port_file) or not open(port_file).read().strip():
