@@ -97,6 +97,8 @@ struct TileWorkspace {
     // sample.
     std::vector<SweepInput> transmittances;
     std::vector<unsigned char> built;
+    // A pixel's own rays, for BuildOptions::sampleRays.
+    std::vector<SampleRay> ownRays;
     // One pixel's inputs, the first of each in use (sized for the largest).
     std::vector<SampleRay> rays;
     std::vector<const SweepInput*> inputs;
@@ -403,9 +405,9 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                     const auto s = samples.subspan((std::size_t(y - sy0) * sw + (x - sx0)) * spp, spp);
                     for (const SampleData& d : s) stats.rawVertices += 2 * d.hitCount + d.volume.size();
                     if (options.sampleRays) {
-                        ws.rays.clear();
-                        for (const SampleData& d : s) ws.rays.push_back({ws.hitsOf(d), d.volume});
-                        options.sampleRays(x, y, ws.rays);
+                        ws.ownRays.clear();
+                        for (const SampleData& d : s) ws.ownRays.push_back({ws.hitsOf(d), d.volume});
+                        options.sampleRays(x, y, ws.ownRays);
                     }
                 }
             if (ws.transmittances.size() < sampleCount) ws.transmittances.resize(sampleCount);
