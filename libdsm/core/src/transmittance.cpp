@@ -48,8 +48,20 @@ bool blocksNothing(const SurfaceHit& h, int channels) {
 // Sorts `items` by depth, equal depths in their given order (what
 // std::stable_sort does, without the buffer it allocates on every call):
 // through a permutation sorted by (depth, index) and a scratch copy.
+// A ray's few hits (the common case) are sorted in place by insertion, which
+// moves an item only past deeper ones and so keeps equal depths in order too.
 template <class T>
 void sortByDepth(std::vector<T>& items, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
+    constexpr std::size_t kInsertionLimit = 16;
+    if (items.size() <= kInsertionLimit) {
+        for (std::size_t i = 1; i < items.size(); ++i) {
+            const T item = items[i];
+            std::size_t j = i;
+            for (; j > 0 && item.z < items[j - 1].z; --j) items[j] = items[j - 1];
+            items[j] = item;
+        }
+        return;
+    }
     if (std::is_sorted(items.begin(), items.end(), [](const T& a, const T& b) { return a.z < b.z; })) return;
     order.resize(items.size());
     for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
