@@ -79,11 +79,4 @@ Compressor& FunctionAverager::compressorFor(const CompressorOptions& options) {
     return *compressors_.back().second;
 }
 
-VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
-                                    double tolerance, bool withCounts, bool centred) {
-    VisibilityFunction result;
-    FunctionAverager().average(children, weights, tolerance, withCounts, centred, result);
-    return result;
-}
-
 DSM_NAMESPACE_END

@@ -37,8 +37,4 @@ private:
     std::vector<std::pair<CompressorOptions, std::unique_ptr<Compressor>>> compressors_;
 };
 
-/// FunctionAverager::average() of one block.
-VisibilityFunction averageFunctions(std::span<const VisibilityView> children, std::span<const double> weights,
-                                    double tolerance, bool withCounts, bool centred = false);
-
 DSM_NAMESPACE_END

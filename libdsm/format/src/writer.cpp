@@ -105,8 +105,8 @@ struct MapWriter::Impl {
         const std::uint32_t ptx = tx / 2, pty = ty / 2;
         const std::uint32_t parentIndex = pty * parent.info.tilesX + ptx;
         PendingTile& p = pending[level + 1][parentIndex];
-        // Coarser pixels over an empty child tile are empty (averageFunctions()
-        // of empty functions), as the parent's pixels start.
+        // Coarser pixels over an empty child tile are empty (the average of
+        // empty functions), as the parent's pixels start.
         if (!pixels.empty()) averageIntoParent(level, tx, ty, pixels, p);
         const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *
                                        (std::min(2 * pty + 2, child.info.tilesY) - 2 * pty);
