@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "dsm/error.h"
+#include "insertion_sort.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -88,12 +89,7 @@ std::uint64_t* radixSortByDepth(std::uint64_t* keys, std::uint64_t* scratch, std
 std::uint64_t* sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
     constexpr std::size_t kInsertionLimit = 24;
     if (n <= kInsertionLimit) {
-        for (std::size_t i = 1; i < n; ++i) {
-            const std::uint64_t key = keys[i];
-            std::size_t j = i;
-            for (; j > 0 && key < keys[j - 1]; --j) keys[j] = keys[j - 1];
-            keys[j] = key;
-        }
+        detail::insertionSort(keys, n, std::less<>());
         return keys;
     }
     const std::uint32_t first = depthOf(keys[0]);
@@ -305,15 +301,15 @@ struct Sweeper::Impl {
         }
         // The flat path numbers its events in 32 bits; the heap serves any input.
         sloped = sloped || events > UINT32_MAX;
-        if (channels == 1) return sloped ? run<1, true>(inputs, sink) : run<1, false>(inputs, sink);
-        return sloped ? run<kMaxChannels, true>(inputs, sink) : run<kMaxChannels, false>(inputs, sink);
+        if (channels == 1) return sloped ? run<1, true>(inputs, events, sink) : run<1, false>(inputs, events, sink);
+        return sloped ? run<kMaxChannels, true>(inputs, events, sink) : run<kMaxChannels, false>(inputs, events, sink);
     }
 
-    // The sweep proper, over checked inputs with NC channels and weights w.
-    // Sink is VertexSink, or a final one whose push() the compiler calls
-    // directly.
+    // The sweep proper, over checked inputs with NC channels and weights w,
+    // `events` steps in all. Sink is VertexSink, or a final one whose push()
+    // the compiler calls directly.
     template <std::size_t NC, bool Sloped, class Sink>
-    std::optional<float> run(Span<const SweepInput* const> inputs, Sink& sink);
+    std::optional<float> run(Span<const SweepInput* const> inputs, std::uint64_t events, Sink& sink);
 };
 
 Sweeper::Sweeper() : impl_(std::make_unique<Impl>()) {}
@@ -382,7 +378,7 @@ bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, 
 }
 
 template <std::size_t NC, bool Sloped, class Sink>
-std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Sink& sink) {
+std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, std::uint64_t events, Sink& sink) {
     const std::size_t n = inputs.size();
     constexpr std::size_t nc = NC;
     // Inputs whose current segment slopes (in any channel of positive weight):
@@ -520,8 +516,6 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, Si
         // order, as the heap takes them) and summed in that order: the same
         // operations in the same order as the heap's, without its
         // unpredictable comparisons or a walk through the inputs per event.
-        std::size_t events = 0;
-        for (std::size_t k = 0; k < n; ++k) events += inputs[k]->size();
         if (eventKeys.size() < events) {
             eventKeys.resize(events);
             eventScratch.resize(events);

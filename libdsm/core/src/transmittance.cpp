@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "dsm/error.h"
+#include "insertion_sort.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -54,12 +55,7 @@ template <class T>
 void sortByDepth(std::vector<T>& items, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
     constexpr std::size_t kInsertionLimit = 16;
     if (items.size() <= kInsertionLimit) {
-        for (std::size_t i = 1; i < items.size(); ++i) {
-            const T item = items[i];
-            std::size_t j = i;
-            for (; j > 0 && item.z < items[j - 1].z; --j) items[j] = items[j - 1];
-            items[j] = item;
-        }
+        detail::insertionSort(items.data(), items.size(), [](const T& a, const T& b) { return a.z < b.z; });
         return;
     }
     if (std::is_sorted(items.begin(), items.end(), [](const T& a, const T& b) { return a.z < b.z; })) return;

@@ -50,8 +50,8 @@ struct MapWriter::Impl {
     std::vector<Level> levels;
     std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
     FunctionAverager averager;  // the coarser levels' pixels
-    VisibilityFunction rounded;  // a pixel with its values rounded to the level's step
-    std::vector<VisibilityFunction> level0Copy;  // the level-0 tile being written
+    VisibilityFunction rounded;  // a coarser pixel with its values rounded to the level's step
+    std::vector<VisibilityFunction> level0Copy;  // the level-0 tile being written, rounded
     // Coarser tiles written, kept for their functions' storage: the next
     // pending tile is averaged into them.
     std::vector<std::vector<VisibilityFunction>> spareTiles;
@@ -68,20 +68,14 @@ struct MapWriter::Impl {
         return std::min(options.tileSize, levelExtent - t * options.tileSize);
     }
 
-    // `pixels` empty stands for a tile whose pixels are all empty: the parts
-    // of a region build and sparse maps are mostly such tiles, and they cost
-    // nothing to store or average.
-    void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>& pixels) {
+    // `pixels`, their values already on the level's step, empty for a tile
+    // whose pixels are all empty: the parts of a region build and sparse maps
+    // are mostly such tiles, and they cost nothing to store or average.
+    void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, const std::vector<VisibilityFunction>& pixels) {
         Level& L = levels[level];
         const std::uint32_t index = ty * L.info.tilesX + tx;
         const format::TileLayout layout{options.channels, options.counts, options.maxLayers, options.formatMinor >= 1,
                                         L.info.valueStep, options.codec};
-        if (L.info.valueStep > 0.0)
-            for (VisibilityFunction& f : pixels)
-                if (!f.empty()) {
-                    roundValues(f, L.info.valueStep, rounded);
-                    std::swap(f, rounded);  // `rounded` keeps f's storage for the next pixel
-                }
         format::EncodedTile encoded =
             pixels.empty() ? format::EncodedTile{} : format::encodeTile(pixels, layout, codecLevel(options));
         if (!encoded.stored.empty()) {
@@ -113,6 +107,11 @@ struct MapWriter::Impl {
         if (++p.childrenReceived == expected) {
             std::vector<VisibilityFunction> done = std::move(p.pixels);
             pending[level + 1].erase(parentIndex);
+            if (parent.info.valueStep > 0.0)
+                for (VisibilityFunction& f : done) {
+                    roundValues(f, parent.info.valueStep, rounded);
+                    std::swap(f, rounded);  // `rounded` keeps f's storage for the next pixel
+                }
             acceptTile(level + 1, ptx, pty, done);
             spareTiles.push_back(std::move(done));
         }
@@ -284,12 +283,14 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const Visibil
         }
     }
     const bool allEmpty = std::all_of(pixels.begin(), pixels.end(), [](const VisibilityFunction& f) { return f.empty(); });
-    // The writer rounds its own copy; copied into the functions of the tile
-    // before, so that a copy allocates nothing once they have grown.
+    // The writer keeps the pixels with their values rounded to the level's
+    // step (a copy when there is none), in the functions of the tile before,
+    // so that it allocates nothing once they have grown.
     std::vector<VisibilityFunction> none;
-    std::vector<VisibilityFunction>& copy = allEmpty ? none : s.level0Copy;
-    if (!allEmpty) copy.assign(pixels.begin(), pixels.end());
-    s.acceptTile(0, tx, ty, copy);
+    std::vector<VisibilityFunction>& rounded = allEmpty ? none : s.level0Copy;
+    rounded.resize(allEmpty ? 0 : pixels.size());
+    for (std::size_t p = 0; p < rounded.size(); ++p) roundValues(pixels[p], s.levels[0].info.valueStep, rounded[p]);
+    s.acceptTile(0, tx, ty, rounded);
 } catch (const Error& e) {
     throw e.withFile(impl_->path);
 }
