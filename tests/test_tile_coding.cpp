@@ -96,11 +96,12 @@ TEST(TileCoding, Crc32MatchesItsBitwiseDefinitionAtEveryLengthAndAlignment) {
         EXPECT_EQ(dsm::format::crc32(bytes.data() + 3, size), bitwise(bytes.data() + 3, size)) << size;
 }
 
-// The word-at-a-time read of the depth ends against the byte-by-byte one,
-// value by value: every length at its boundaries, values beyond 32 bits (a
-// fifth byte above 0x0F, no end within 5 bytes), each followed by the bytes
-// of the next values, which must be where both readers left off.
-TEST(TileCoding, TheBranchlessVarintReadMatchesTheByteByByteOne) {
+// The block read of a run (readInto) against as many byte-by-byte reads:
+// the same values, flag and position after every length at its boundaries,
+// values beyond 32 bits (a fifth byte above 0x0F, no end within 5 bytes),
+// over-long encodings and random bytes, in runs long enough for several
+// blocks and ending at every distance from the end of the data.
+TEST(TileCoding, TheBlockReadOfARunMatchesValueByValueReads) {
     std::vector<std::vector<std::uint8_t>> encodings;
     for (const std::uint32_t v : {0u, 1u, 127u, 128u, 300u, 16383u, 16384u, (1u << 21) - 1, 1u << 21,
                                   (1u << 28) - 1, 1u << 28, 0x12345678u, 0xFFFFFFFFu}) {
@@ -112,27 +113,31 @@ TEST(TileCoding, TheBranchlessVarintReadMatchesTheByteByByteOne) {
     encodings.push_back({0xFF, 0xFF, 0xFF, 0xFF, 0x7F});        // beyond 32 bits
     encodings.push_back({0x80, 0x80, 0x80, 0x80, 0x80, 0x01});  // no end within 5 bytes
     encodings.push_back({0x81, 0x80, 0x00});                    // an over-long 1
+    encodings.push_back({0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF,
+                         0xFF, 0xFF, 0x00});  // no end within a block
     std::mt19937 rng(3);
-    for (int trial = 0; trial < 2000; ++trial) {
+    for (int trial = 0; trial < 4000; ++trial) {
         std::vector<std::uint8_t> bytes;
-        std::size_t count = 1 + rng() % 6;
-        for (std::size_t k = 0; k < count; ++k) {
-            const auto& e = encodings[rng() % encodings.size()];
+        const std::size_t encoded = rng() % 240;
+        for (std::size_t k = 0; k < encoded; ++k) {
+            if (rng() % 8 == 0) {
+                bytes.push_back(static_cast<std::uint8_t>(rng()));  // a random byte
+                continue;
+            }
+            // Mostly the lengths of real depths (1 to 3 bytes), now and then any.
+            const auto& e = encodings[rng() % 4 == 0 ? rng() % encodings.size() : 3 + rng() % 6];
             bytes.insert(bytes.end(), e.begin(), e.end());
         }
-        const std::size_t payload = bytes.size();
-        bytes.resize(payload + 5 * count + 8, 0x00);
-        dsm::detail::VarintReader checked(bytes.data(), bytes.data() + payload);
-        dsm::detail::VarintReader words(bytes.data(), bytes.data() + bytes.size());
-        ASSERT_TRUE(words.holdsWords(count));
-        for (std::size_t k = 0; k < count && checked.ok(); ++k) {
-            const std::uint32_t expected = checked.next();
-            const std::uint32_t got = words.nextBranchless();
-            ASSERT_EQ(words.ok(), checked.ok()) << "trial " << trial << " value " << k;
-            if (!checked.ok()) break;
-            ASSERT_EQ(got, expected) << "trial " << trial << " value " << k;
-            ASSERT_EQ(bytes.size() - words.remaining(), payload - checked.remaining()) << "trial " << trial;
-        }
+        // Asked for more or fewer values than were written.
+        const std::size_t count = rng() % (encoded + 8);
+        std::vector<std::uint32_t> expected(count), got(count, 0xDEADBEEF);
+        dsm::detail::VarintReader byOne(bytes.data(), bytes.data() + bytes.size());
+        for (std::uint32_t& v : expected) v = byOne.next();
+        dsm::detail::VarintReader inBlocks(bytes.data(), bytes.data() + bytes.size());
+        inBlocks.readInto(got.data(), count);
+        ASSERT_EQ(got, expected) << "trial " << trial;
+        ASSERT_EQ(inBlocks.ok(), byOne.ok()) << "trial " << trial;
+        ASSERT_EQ(inBlocks.remaining(), byOne.remaining()) << "trial " << trial;
     }
 }
 

@@ -10,6 +10,8 @@
 #include <string>
 #include <vector>
 
+#include "varint_groups.h"
+
 namespace dsm::detail {
 
 /// Appends little-endian values to a byte vector.
@@ -108,26 +110,21 @@ public:
             for (std::size_t i = 0; i < count; ++i) f(i, next());
         }
     }
-    /// Whether the next `count` values can be read by nextBranchless():
-    /// little-endian, and the run cannot reach the end (5 bytes a value at
-    /// most, and 8 to spare for whole-word loads).
-    bool holdsWords(std::size_t count) const {
-        return std::endian::native == std::endian::little && 5 * count + 8 <= remaining();
-    }
-    /// The next value, read from a word of 8 bytes without a branch on its
-    /// length; only where holdsWords() covers it. For values whose lengths
-    /// vary unpredictably (the depth ends of neighbouring pixels), where
-    /// next()'s branches mispredict. A value beyond 32 bits (a fifth byte
-    /// above 0x0F, or no end within 5 bytes) sets the flag and moves on by
-    /// 5 bytes, as next() does within a checked run.
-    std::uint32_t nextBranchless() {
-        std::uint64_t w;
-        std::memcpy(&w, at_, 8);
-        const std::uint64_t ends = ~w & 0x8080808080808080u;  // the high bit of each byte that ends a value
-        const unsigned length = std::min(static_cast<unsigned>(std::countr_zero(ends)) / 8 + 1, 5u);
-        bad_ |= length == 5 && (w & 0xF000000000u) != 0;
-        at_ += length;
-        return gather(w & ((ends & (0 - ends)) * 2 - 1));  // the bytes up to the first end
+    /// Reads the next `count` values into out[0..count): the same values,
+    /// flag and position as `count` calls of next(). For long runs whose
+    /// lengths vary in no order a predictor learns (a tile's depths): four
+    /// values at a time where the processor allows (readVarintGroups), each
+    /// value that stops a group read by next().
+    void readInto(std::uint32_t* out, std::size_t count) {
+        std::size_t i = 0;
+        if (varintGroupsSupported()) {
+            for (;;) {
+                i += readVarintGroups(at_, end_, out + i, count - i);
+                if (count - i < 4 || remaining() < 80) break;
+                out[i++] = next();
+            }
+        }
+        for (; i < count; ++i) out[i] = next();
     }
     /// When the next `count` (<= 8) values are each one byte (below 128) and
     /// 8 bytes remain: moves past them and sets `values` to those bytes, the
@@ -207,12 +204,6 @@ private:
             return 0;
         }
         return v + (b << 28) - (0x80u << 21);
-    }
-    // The 7-bit groups of a value's bytes (at most 5, the first lowest),
-    // without their continuation bits.
-    static std::uint32_t gather(std::uint64_t x) {
-        return static_cast<std::uint32_t>((x & 0x7F) | ((x >> 1) & 0x3F80) | ((x >> 2) & 0x1FC000) |
-                                          ((x >> 3) & 0xFE00000) | ((x >> 4) & 0xF0000000));
     }
     std::uint32_t nextChecked() {
         std::uint32_t v = 0;

@@ -519,42 +519,42 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
     return bits;
 }
 
-// The ends of every pixel, each from the previous non-empty pixel's (zigzag
-// differences). `Words`: read by VarintReader::nextBranchless(), the run
-// checked once; their lengths vary from pixel to pixel.
-template <bool Words>
-[[gnu::always_inline]] inline void decodeDepthEnds(VarintReader& r, const PixelRecord* records, std::size_t pixels,
-                                                   float* z, DecodeChecks& checks) {
-    const auto next = [&r] { return Words ? r.nextBranchless() : r.next(); };
+// PREDICTED_DEPTHS (spec §7): the ends of every pixel, each from the
+// previous non-empty pixel's (zigzag differences), then the steps between
+// them. One integer a vertex in all (a pixel of one vertex has one end, of
+// two its two ends, of n > 2 two ends and n - 2 steps), read as one run
+// first: their lengths vary from integer to integer in no order.
+void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std::size_t pixels, float* z,
+                           DecodeChecks& tileChecks) {
+    const std::uint32_t vertices = records[pixels].vertexStart;
+    const std::unique_ptr<std::uint32_t[]> integers(new std::uint32_t[vertices]);
+    reader.readInto(integers.get(), vertices);
+    DecodeChecks checks = tileChecks;
+    const std::uint32_t* next = integers.get();
     std::uint32_t previousFirst = 0, previousLast = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
         if (a == b) continue;
-        const std::uint32_t first = previousFirst + unzigzag(next());
-        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(next()) : first;
+        const std::uint32_t first = previousFirst + unzigzag(*next++);
+        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(*next++) : first;
         previousFirst = first;
         previousLast = last;
         noteDepthEnds(first, last, checks);
         z[a] = std::bit_cast<float>(first);
         z[b - 1] = std::bit_cast<float>(last);
     }
-}
-
-// PREDICTED_DEPTHS (spec §7): the ends of every pixel, then the steps
-// between them.
-void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std::size_t pixels, float* z,
-                           DecodeChecks& tileChecks) {
-    VarintReader r = reader;  // local copies, kept in registers
-    DecodeChecks checks = tileChecks;
-    if (r.holdsWords(2 * pixels)) decodeDepthEnds<true>(r, records, pixels, z, checks);
-    else decodeDepthEnds<false>(r, records, pixels, z, checks);
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
         if (b - a < 3) continue;
-        // Beyond the pixel's last depth, or wrapped past 2^32 - 1.
-        checks.suspect |= decodeDepthSteps(r, z, a, b - 1) > std::bit_cast<std::uint32_t>(z[b - 1]);
+        // Summed in 64 bits: beyond the pixel's last depth, or wrapped past
+        // 2^32 - 1, is one check for the pixel (the steps are non-negative).
+        std::uint64_t bits = std::bit_cast<std::uint32_t>(z[a]);
+        for (std::uint32_t i = a + 1; i < b - 1; ++i) {
+            bits += *next++;
+            z[i] = std::bit_cast<float>(static_cast<std::uint32_t>(bits));
+        }
+        checks.suspect |= bits > std::bit_cast<std::uint32_t>(z[b - 1]);
     }
-    reader = r;
     checks.suspect |= checks.maxBits >= kInfinityBits;
     tileChecks = checks;
 }
