@@ -13,6 +13,8 @@
 #include <limits>
 #include <random>
 #include <vector>
+#include <atomic>
+#include <thread>
 
 #include "map_fixtures.h"
 #include "oracle.h"
@@ -385,4 +387,60 @@ TEST(TileCoding, DecodingRejectsExactlyWhatValidationRejects) {
                     << c.name << " step " << step;
         }
     }
+}
+
+// The decoder keeps zstd contexts for reuse across tiles and threads: tiles
+// decoded from four threads at once, good ones among damaged ones (whose
+// failure must hand the context back as well), decode as one thread does.
+TEST(TileCoding, ZstdTilesDecodeAlikeFromManyThreadsAtOnce) {
+    constexpr std::uint32_t width = 8, height = 8;
+    std::vector<VisibilityFunction> pixels;
+    for (std::uint32_t p = 0; p < width * height; ++p) {
+        VisibilityFunction f(1);
+        for (int i = 0; i < 12; ++i) {
+            const float v = 1.0f - static_cast<float>(i) / 16.0f;
+            f.append(1.0f + 0.25f * static_cast<float>(i) + 0.001f * static_cast<float>(p % 5), &v);
+        }
+        pixels.push_back(f);
+    }
+    dsm::format::TileLayout layout{1, false, 1, true, 0.0};
+    layout.codec = dsm::TileCodec::Zstd;
+    layout.predictedDepths = true;
+    const dsm::format::EncodedTile good = dsm::format::encodeTile(pixels, layout, 3);
+    ASSERT_LT(good.summary.storedBytes, good.summary.rawBytes);  // compressed: zstd decodes it
+    dsm::format::EncodedTile damaged = good;
+    damaged.stored.resize(damaged.stored.size() - 4);  // the frame cut short, resealed
+    damaged.summary.storedBytes = damaged.stored.size();
+    damaged.summary.crc32 = dsm::format::crc32(damaged.stored.data(), damaged.stored.size());
+
+    const auto decodeGood = [&] {
+        return dsm::format::decodeTile(good.stored, good.summary, width, height, layout, dsm::ReaderOptions{}, "tile",
+                                       0, 0);
+    };
+    const dsm::format::DecodedTile once = decodeGood();
+    for (std::uint32_t p = 0; p < width * height; ++p)
+        ASSERT_TRUE(dsm::test::sameFunction(once.pixel(p), pixels[p], false)) << p;
+    std::atomic<int> wrong{0}, damagedAccepted{0};
+    std::vector<std::thread> threads;
+    for (int t = 0; t < 4; ++t)
+        threads.emplace_back([&] {
+            for (int k = 0; k < 200; ++k) {
+                if (k % 3 == 0) {
+                    try {
+                        (void)dsm::format::decodeTile(damaged.stored, damaged.summary, width, height, layout,
+                                                      dsm::ReaderOptions{}, "tile", 0, 0);
+                        ++damagedAccepted;
+                    } catch (const dsm::Error& e) {
+                        if (std::string(e.what()).find("zstd cannot decompress") == std::string::npos) ++wrong;
+                    }
+                    continue;
+                }
+                const dsm::format::DecodedTile d = decodeGood();
+                for (std::uint32_t p = 0; p < width * height; ++p)
+                    if (!dsm::test::sameFunction(d.pixel(p), pixels[p], false)) ++wrong;
+            }
+        });
+    for (std::thread& t : threads) t.join();
+    EXPECT_EQ(wrong.load(), 0);
+    EXPECT_EQ(damagedAccepted.load(), 0);
 }

@@ -1,6 +1,8 @@
 #include "tile_codec.h"
 
 #include <algorithm>
+#include <array>
+#include <atomic>
 #include <bit>
 #include <functional>
 #include <cmath>
@@ -735,6 +737,45 @@ int inflateWithoutAdler(std::uint8_t* out, std::size_t outSize, std::span<const 
     return rc;
 }
 
+// zstd decompression with a context kept from an earlier tile: setting one
+// up (ZSTD_decompress() does, each call) costs about as much as
+// decompressing a small tile. A few are kept for the threads that decode
+// at once; any beyond them are made and freed per tile.
+class ZstdContexts {
+public:
+    ~ZstdContexts() {
+        for (auto& slot : slots_) ZSTD_freeDCtx(slot.load());
+    }
+    // ZSTD_decompressDCtx()'s result.
+    std::size_t decompress(void* out, std::size_t outSize, const void* in, std::size_t inSize) {
+        ZSTD_DCtx* context = take();
+        if (!context) return ZSTD_decompress(out, outSize, in, inSize);  // out of memory for one
+        const std::size_t size = ZSTD_decompressDCtx(context, out, outSize, in, inSize);
+        give(context);
+        return size;
+    }
+
+private:
+    ZSTD_DCtx* take() {
+        for (auto& slot : slots_)
+            if (ZSTD_DCtx* context = slot.exchange(nullptr, std::memory_order_acquire)) return context;
+        return ZSTD_createDCtx();
+    }
+    void give(ZSTD_DCtx* context) {
+        for (auto& slot : slots_) {
+            ZSTD_DCtx* empty = nullptr;
+            if (slot.compare_exchange_strong(empty, context, std::memory_order_release)) return;
+        }
+        ZSTD_freeDCtx(context);
+    }
+    std::array<std::atomic<ZSTD_DCtx*>, 4> slots_{};
+};
+
+std::size_t zstdDecompress(void* out, std::size_t outSize, const void* in, std::size_t inSize) {
+    static ZstdContexts contexts;
+    return contexts.decompress(out, outSize, in, inSize);
+}
+
 }  // namespace
 
 DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& summary, std::uint32_t width,
@@ -755,7 +796,7 @@ DecodedTile decodeTile(std::span<const std::uint8_t> stored, const TileSummary& 
     std::span<const std::uint8_t> raw = stored;
     if (summary.storedBytes < summary.rawBytes && layout.codec == TileCodec::Zstd) {
         inflated.reset(new std::uint8_t[summary.rawBytes]);
-        const std::size_t size = ZSTD_decompress(inflated.get(), summary.rawBytes, stored.data(), stored.size());
+        const std::size_t size = zstdDecompress(inflated.get(), summary.rawBytes, stored.data(), stored.size());
         if (ZSTD_isError(size))
             fail(concat("zstd cannot decompress the tile (", ZSTD_getErrorName(size), ")"), ErrorCode::corrupt);
         if (size != summary.rawBytes)
