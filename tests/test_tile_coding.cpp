@@ -444,3 +444,35 @@ TEST(TileCoding, ZstdTilesDecodeAlikeFromManyThreadsAtOnce) {
     EXPECT_EQ(wrong.load(), 0);
     EXPECT_EQ(damagedAccepted.load(), 0);
 }
+
+// The depths of a tile's pixels, whatever their vertex counts: 0 to 14 (a
+// pixel's steps are written eight at a time, past its own, up to eight, and
+// one by one beyond), in random order and at the tile's end, with depths
+// anywhere in float32's range, come back bit for bit.
+TEST(TileCoding, DepthsOfPixelsOfEveryVertexCountRoundTripBitForBit) {
+    std::mt19937 rng(17);
+    for (int trial = 0; trial < 40; ++trial) {
+        const std::uint32_t width = 1 + rng() % 16, height = 1 + rng() % 16;
+        std::vector<VisibilityFunction> pixels;
+        for (std::uint32_t p = 0; p < width * height; ++p) {
+            VisibilityFunction f(1);
+            const int vertices = static_cast<int>(rng() % 15);
+            float z = std::ldexp(1.0f + static_cast<float>(rng() % 1000) / 1000.0f, static_cast<int>(rng() % 40) - 20);
+            float v = 1.0f;
+            for (int i = 0; i < vertices; ++i) {
+                z = std::nextafter(z, std::numeric_limits<float>::infinity()) * (1.0f + static_cast<float>(rng() % 64) / 256.0f);
+                v *= static_cast<float>(rng() % 256) / 256.0f;
+                f.append(z, &v);
+            }
+            pixels.push_back(f);
+        }
+        dsm::format::TileLayout layout{1, false, 1, true, 0.0};
+        layout.predictedDepths = true;
+        const dsm::format::EncodedTile tile = dsm::format::encodeTile(pixels, layout, 6);
+        if (tile.stored.empty()) continue;  // every pixel empty
+        const dsm::format::DecodedTile decoded = dsm::format::decodeTile(tile.stored, tile.summary, width, height, layout,
+                                                                         dsm::ReaderOptions{}, "tile", 0, 0);
+        for (std::uint32_t p = 0; p < width * height; ++p)
+            ASSERT_TRUE(dsm::test::sameFunction(decoded.pixel(p), pixels[p], false)) << "trial " << trial << " pixel " << p;
+    }
+}

@@ -528,34 +528,52 @@ void decodeValues(VarintReader& reader, const PixelRecord* records, std::size_t 
 // first: their lengths vary from integer to integer in no order.
 void decodePredictedDepths(VarintReader& reader, const PixelRecord* records, std::size_t pixels, float* z,
                            DecodeChecks& tileChecks) {
+    constexpr std::uint32_t kRun = 8;  // steps of a pixel written at once, past its own
     const std::uint32_t vertices = records[pixels].vertexStart;
-    const std::unique_ptr<std::uint32_t[]> integers(new std::uint32_t[vertices]);
+    const std::unique_ptr<std::uint32_t[]> integers(new std::uint32_t[std::size_t(vertices) + kRun]);
     reader.readInto(integers.get(), vertices);
+    std::fill_n(integers.get() + vertices, kRun, 0u);
+    std::size_t endCount = 0;
+    for (std::size_t p = 0; p < pixels; ++p)
+        endCount += std::min(records[p + 1].vertexStart - records[p].vertexStart, 2u);
     DecodeChecks checks = tileChecks;
-    const std::uint32_t* next = integers.get();
+    const std::uint32_t* end = integers.get();
+    const std::uint32_t* step = end + endCount;
     std::uint32_t previousFirst = 0, previousLast = 0;
     for (std::size_t p = 0; p < pixels; ++p) {
         const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
         if (a == b) continue;
-        const std::uint32_t first = previousFirst + unzigzag(*next++);
-        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(*next++) : first;
+        const std::uint32_t first = previousFirst + unzigzag(*end++);
+        const std::uint32_t last = b - a > 1 ? previousLast + unzigzag(*end++) : first;
         previousFirst = first;
         previousLast = last;
         noteDepthEnds(first, last, checks);
         z[a] = std::bit_cast<float>(first);
-        z[b - 1] = std::bit_cast<float>(last);
-    }
-    for (std::size_t p = 0; p < pixels; ++p) {
-        const std::uint32_t a = records[p].vertexStart, b = records[p + 1].vertexStart;
-        if (b - a < 3) continue;
-        // Summed in 64 bits: beyond the pixel's last depth, or wrapped past
-        // 2^32 - 1, is one check for the pixel (the steps are non-negative).
-        std::uint64_t bits = std::bit_cast<std::uint32_t>(z[a]);
-        for (std::uint32_t i = a + 1; i < b - 1; ++i) {
-            bits += *next++;
-            z[i] = std::bit_cast<float>(static_cast<std::uint32_t>(bits));
+        // The steps between, summed in 64 bits: beyond the last depth, or
+        // wrapped past 2^32 - 1, is one check for the pixel (the steps are
+        // non-negative).
+        const std::uint32_t steps = b - a > 2 ? b - a - 2 : 0;
+        if (steps > 0 && steps <= kRun && a + 1 + kRun <= vertices) {
+            // The common pixel: kRun depths written whatever its count, so
+            // that no branch depends on it; those past its own belong to the
+            // pixels after it, which write them again.
+            std::uint64_t bits = first, sums[kRun];
+            for (std::uint32_t k = 0; k < kRun; ++k) {
+                bits += step[k];
+                sums[k] = bits;
+                z[a + 1 + k] = std::bit_cast<float>(static_cast<std::uint32_t>(bits));
+            }
+            step += steps;
+            checks.suspect |= sums[steps - 1] > last;
+        } else if (steps > 0) {
+            std::uint64_t bits = first;
+            for (std::uint32_t i = a + 1; i < b - 1; ++i) {
+                bits += *step++;
+                z[i] = std::bit_cast<float>(static_cast<std::uint32_t>(bits));
+            }
+            checks.suspect |= bits > last;
         }
-        checks.suspect |= bits > std::bit_cast<std::uint32_t>(z[b - 1]);
+        z[b - 1] = std::bit_cast<float>(last);  // after the steps, which may have passed it
     }
     checks.suspect |= checks.maxBits >= kInfinityBits;
     tileChecks = checks;
