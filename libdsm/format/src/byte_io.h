@@ -120,7 +120,7 @@ public:
         if (varintGroupsSupported()) {
             for (;;) {
                 i += readVarintGroups(at_, end_, out + i, count - i);
-                if (count - i < 4 || remaining() < 80) break;
+                if (count - i < 4 || remaining() < kVarintGroupBytes) break;
                 out[i++] = next();
             }
         }

@@ -49,16 +49,17 @@ DSM_VARINT_TARGET inline std::uint64_t valueEnds(const std::uint8_t* p) {
     return ends;
 }
 
-DSM_VARINT_TARGET std::size_t readGroups(const std::uint8_t*& at, const std::uint8_t* end, std::uint32_t* out,
-                                         std::size_t count) {
+}  // namespace
+
+DSM_VARINT_TARGET std::size_t readVarintGroups(const std::uint8_t*& at, const std::uint8_t* end, std::uint32_t* out,
+                                               std::size_t count) {
     const __m128i low7 = _mm_set1_epi32(0x7F);
     const __m128i second = _mm_set1_epi32(0x3F80);
     const __m128i third = _mm_set1_epi32(0x1FC000);
     const __m128i fourth = _mm_set1_epi32(0xFE00000);
     const std::uint8_t* p = at;
     std::size_t n = 0;
-    // A window of 64 bytes, and 16 to spare for the last group's load.
-    while (count - n >= 4 && end - p >= 80) {
+    while (count - n >= 4 && static_cast<std::size_t>(end - p) >= kVarintGroupBytes) {
         std::uint64_t ends = valueEnds(p);
         unsigned start = 0;  // the next value's first byte in the window
         for (;;) {
@@ -92,8 +93,6 @@ DSM_VARINT_TARGET std::size_t readGroups(const std::uint8_t*& at, const std::uin
     return n;
 }
 
-}  // namespace
-
 bool varintGroupsSupported() {
     static const bool supported = [] {
         __builtin_cpu_init();  // may run before libgcc's own initialisation
@@ -102,16 +101,13 @@ bool varintGroupsSupported() {
     return supported;
 }
 
-std::size_t readVarintGroups(const std::uint8_t*& at, const std::uint8_t* end, std::uint32_t* out,
-                             std::size_t count) {
-    return varintGroupsSupported() ? readGroups(at, end, out, count) : 0;
-}
-
 #else
 
 bool varintGroupsSupported() { return false; }
 
-std::size_t readVarintGroups(const std::uint8_t*&, const std::uint8_t*, std::uint32_t*, std::size_t) { return 0; }
+std::size_t readVarintGroups(const std::uint8_t*&, const std::uint8_t*, std::uint32_t*, std::size_t) {
+    return 0;  // never called: varintGroupsSupported() is false
+}
 
 #endif
 
