@@ -20,6 +20,7 @@
 #include <vector>
 
 #include "dsm/reader.h"
+#include "tested_internal.h"
 
 namespace dsm::detail {
 
@@ -33,7 +34,7 @@ struct DepthRange {
     }
 };
 
-class DepthHierarchy {
+class DSM_TESTED_INTERNAL DepthHierarchy {
 public:
     /// Levels 1 .. tileLevel-1 of one tile, finest first, each row-major.
     struct TilePyramid {

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "depth_hierarchy.h"
+#include "ray_packet.h"
 #include "dsm/auto_bias.h"
 #include "dsm/error.h"
 #include "reader_impl.h"
@@ -15,7 +16,10 @@
 DSM_NAMESPACE_BEGIN
 
 using detail::concat;
+using detail::clipRay;
 using detail::DepthRange;
+using detail::RasterRay;
+using detail::RayPacket;
 
 struct SoftShadowTracer::Impl {
     std::shared_ptr<const DeepShadowMap> map;
@@ -47,27 +51,6 @@ namespace {
 
 constexpr int kMicrocacheTiles = 8;
 
-// A ray between two light-space points, as its raster image r(u) = r0 + u dr,
-// u in [0, 1], with 1/z linear in u (perspective-correct depth).
-struct RasterRay {
-    double r0x = 0.0, r0y = 0.0, drx = 0.0, dry = 0.0;
-    double invZ0 = 0.0, dInvZ = 0.0;
-    double z(double u) const { return 1.0 / (invZ0 + u * dInvZ); }
-};
-
-// Clips [ua, ub] to the part of the ray inside the closed box; false if none.
-bool clip(const RasterRay& r, double x0, double y0, double x1, double y1, double& ua, double& ub) {
-    auto slab = [&](double origin, double direction, double lo, double hi) {
-        if (direction == 0.0) return origin >= lo && origin <= hi;
-        double t0 = (lo - origin) / direction, t1 = (hi - origin) / direction;
-        if (t0 > t1) std::swap(t0, t1);
-        ua = std::max(ua, t0);
-        ub = std::min(ub, t1);
-        return true;
-    };
-    return slab(r.r0x, r.drx, x0, x1) && slab(r.r0y, r.dry, y0, y1) && ua <= ub;
-}
-
 // Estimated samples k = 1..count of the segment (z0, z1] at depths
 // z0 + k (z1 - z0) / count that lie in [lo, hi] and beyond `consumed`.
 // Returns how many, and the deepest in `deepest`.
@@ -97,33 +80,6 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double l
     deepest = depth(last);
     return last - first + 1;
 }
-
-// The ray's progress along one raster axis of the quadtree walk's frame,
-// set up once per ray: where it is in each half of a node split at `middle`.
-struct RayAcrossAxis {
-    bool fixed;       // the ray (almost) does not move along this axis
-    float low, high;  // its span along the axis when fixed
-    float origin, inverseStep, slack;
-    int firstHalf;  // the half the ray is in before it crosses a middle
-
-    // The ray's parameters [a[i], b[i]] within half i of the stretch [ta, tb]
-    // (empty when a > b); returns where it enters the second half (-inf when fixed).
-    float split(float ta, float tb, float middle, float a[2], float b[2]) const {
-        constexpr float inf = std::numeric_limits<float>::infinity();
-        if (fixed) {
-            a[0] = a[1] = ta;
-            b[0] = low <= middle ? tb : -inf;
-            b[1] = high >= middle ? tb : -inf;
-            return -inf;
-        }
-        const float t = (middle - origin) * inverseStep;
-        a[firstHalf] = ta;
-        b[firstHalf] = std::min(tb, t + slack);
-        a[1 - firstHalf] = std::max(ta, t - slack);
-        b[1 - firstHalf] = tb;
-        return a[1 - firstHalf];
-    }
-};
 
 }  // namespace
 
@@ -289,132 +245,75 @@ struct SoftShadowContext::Impl {
         }
     }
 
-    // Xie §4.3 / §5.2: descend only into nodes whose depth range the ray's
-    // depth range meets, children in the order the ray enters them, starting
-    // at the level g where the ray's raster box spans at most 2 x 2 nodes
-    // (Curtis §3.5), not at the root: a ray shortened by the classification
-    // covers only a few pixels. In single precision, relative to the corner
-    // of those 2 x 2 nodes and to u = ua: per node two products give the
-    // inverse depths at the ends of its stretch of the ray and two more the
-    // children's stretches, where the ray crosses the node's middle column
-    // and row (no division, no libm call). Each stretch is widened by a few
-    // ulps, so rounding can add a pixel but never lose one; each pixel
-    // reached is clipped again in double, so the pixels the ray crosses get
-    // the same stretch as in walkPixels.
-    void walkHierarchy(double ua, double ub) {
-        const detail::DepthHierarchy& hierarchy = *shared->hierarchy;
+    // Xie §4.3 / §5.2 for the rays of a query at once: the packet descends
+    // only into nodes whose depth range some of its rays' depth ranges meet
+    // (ray_packet.h), and finds each ray's pixels; each is then clipped in
+    // double and read in the order the ray crosses them, as walkPixels() reads
+    // them. A ray within one pixel reads it alone.
+    struct PacketRay {
+        RasterRay ray;
+        double ua = 0.0, ub = 0.0;
+        bool traced = false;             // crosses the map
+        int lane = -1;                   // in the packet, or -1
+        std::uint32_t x = 0, y = 0;      // its pixel, when it has only one
+    };
+    std::vector<PacketRay> packetRays;
+    RasterRay laneRays[RayPacket::kLanes];
+    double laneUa[RayPacket::kLanes], laneUb[RayPacket::kLanes];
+    RayPacket packet;
+    struct Crossed {
+        double a, b;
+        std::uint32_t x, y;
+    };
+    std::vector<Crossed> crossed;
+
+    // Sorts out the rays of packetRays[first, first + count), count <=
+    // kLanes: those that cross more than one pixel go into the packet.
+    void tracePacket(std::size_t first, std::size_t count) {
         const MapInfo& m = info();
-        const double ax = ray.r0x + ua * ray.drx, bx = ray.r0x + ub * ray.drx;
-        const double ay = ray.r0y + ua * ray.dry, by = ray.r0y + ub * ray.dry;
         const auto pixel = [](double v, std::uint32_t n) {
             return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
         };
-        const std::uint32_t px0 = pixel(std::min(ax, bx), m.width), px1 = pixel(std::max(ax, bx), m.width);
-        const std::uint32_t py0 = pixel(std::min(ay, by), m.height), py1 = pixel(std::max(ay, by), m.height);
-        const int g0 = std::min(static_cast<int>(std::bit_width(std::max(px1 - px0, py1 - py0))), hierarchy.topLevel());
-        if (g0 == 0) {
-            intersectPixel(px0, py0, ua, ub);
+        int lanes = 0;
+        for (std::size_t k = first; k < first + count; ++k) {
+            PacketRay& p = packetRays[k];
+            p.lane = -1;
+            if (!p.traced) continue;
+            const double ax = p.ray.r0x + p.ua * p.ray.drx, bx = p.ray.r0x + p.ub * p.ray.drx;
+            const double ay = p.ray.r0y + p.ua * p.ray.dry, by = p.ray.r0y + p.ub * p.ray.dry;
+            p.x = pixel(std::min(ax, bx), m.width);
+            p.y = pixel(std::min(ay, by), m.height);
+            if (p.x == pixel(std::max(ax, bx), m.width) && p.y == pixel(std::max(ay, by), m.height)) continue;
+            p.lane = lanes;
+            laneRays[lanes] = p.ray;
+            laneUa[lanes] = p.ua;
+            laneUb[lanes] = p.ub;
+            ++lanes;
+        }
+        packet.trace(*shared->hierarchy, laneRays, laneUa, laneUb, lanes, zThreshold);
+        stats.nodesVisited += packet.nodeVisits();
+    }
+
+    // The ray of packetRays[k] (set as `ray`) through the pixels the packet found.
+    void walkPacketRay(const PacketRay& p) {
+        const MapInfo& m = info();
+        if (p.lane < 0) {
+            intersectPixel(p.x, p.y, p.ua, p.ub);
             return;
         }
-        const int tileLevel = hierarchy.tileLevel();
-        // The frame: the corner of the 2 x 2 nodes of level g0 from (bx0, by0).
-        const std::uint32_t bx0 = px0 >> g0, by0 = py0 >> g0;
-        const double fx = static_cast<double>(std::uint64_t{bx0} << g0), fy = static_cast<double>(std::uint64_t{by0} << g0);
-        const auto ox = static_cast<float>(ax - fx), oy = static_cast<float>(ay - fy);
-        const auto dx = static_cast<float>(ray.drx), dy = static_cast<float>(ray.dry);
-        const auto length = static_cast<float>(ub - ua);
-        // Rounding bounds: positions in the frame are below 2^(g0+2), so a few
-        // ulps of that in raster units; inverse depths a few ulps of their
-        // largest term.
-        const float delta = 2e-6f * static_cast<float>(std::uint64_t{1} << g0);
-        const bool alongY = std::abs(dx) * length <= delta, alongX = std::abs(dy) * length <= delta;
-        const float invDx = alongY ? 0.0f : 1.0f / dx, invDy = alongX ? 0.0f : 1.0f / dy;
-        const float slackX = delta * std::abs(invDx) + 1e-6f * length, slackY = delta * std::abs(invDy) + 1e-6f * length;
-        // A ray (almost) parallel to an axis: its span across that axis.
-        const float xLow = std::min(ox, ox + dx * length) - delta, xHigh = std::max(ox, ox + dx * length) + delta;
-        const float yLow = std::min(oy, oy + dy * length) - delta, yHigh = std::max(oy, oy + dy * length) + delta;
-        const auto w0 = static_cast<float>(ray.invZ0 + ua * ray.dInvZ), dw = static_cast<float>(ray.dInvZ);
-        const float wError = 1e-6f * (std::abs(w0) + std::abs(dw) * length);
-        const auto W = static_cast<float>(static_cast<double>(m.width) - fx);
-        const auto H = static_cast<float>(static_cast<double>(m.height) - fy);
-        const auto zT = static_cast<float>(zThreshold);
-        const float inf = std::numeric_limits<float>::infinity();
-        // The column (row) the ray is in before it crosses a node's middle.
-        const int c0 = dx > 0.0f ? 0 : 1, r0 = dy > 0.0f ? 0 : 1;
-        const RayAcrossAxis acrossX{alongY, xLow, xHigh, ox, invDx, slackX, c0};
-        const RayAcrossAxis acrossY{alongX, yLow, yHigh, oy, invDy, slackY, r0};
-
-        struct Node {
-            float ta, tb;
-            std::uint32_t x, y;
-            int g;
-        };
-        Node stack[4 * 66];
-        int top = 0;
-        // Pushes the children (x + i, y + j) of level g of a stretch
-        // [ta, tb], split at the middle (xm, ym) in the frame.
-        const auto split = [&](float ta, float tb, float xm, float ym, std::uint32_t x, std::uint32_t y, int g) {
-            float colA[2], colB[2], rowA[2], rowB[2];
-            // Where the ray enters the second column (row).
-            const float tx = acrossX.split(ta, tb, xm, colA, colB);
-            const float ty = acrossY.split(ta, tb, ym, rowA, rowB);
-            if (xm >= W) colB[1] = -inf;  // beyond the map's edge
-            if (ym >= H) rowB[1] = -inf;
-            const auto push = [&](int i, int j) {
-                const float a = std::max(colA[i], rowA[j]), b = std::min(colB[i], rowB[j]);
-                if (a <= b) stack[top++] = {a, b, x + static_cast<std::uint32_t>(i), y + static_cast<std::uint32_t>(j), g};
-            };
-            // Entered in the order: first column and row, then the crossing
-            // that comes first, then the other; pushed last-first.
-            push(1 - c0, 1 - r0);
-            if (tx <= ty) {
-                push(c0, 1 - r0);
-                push(1 - c0, r0);
-            } else {
-                push(1 - c0, r0);
-                push(c0, 1 - r0);
-            }
-            push(c0, r0);
-        };
-        const auto size = static_cast<float>(std::uint64_t{1} << g0);
-        split(0.0f, length, size, size, bx0, by0, g0);
-
-        const detail::DepthHierarchy::TilePyramid* tile = nullptr;  // the tile (tileX, tileY)
-        std::uint32_t tileX = ~0u, tileY = ~0u;
-        while (top > 0) {
-            const Node e = stack[--top];
-            if (e.g == 0) {
-                double a = ua, b = ub;
-                const double px = e.x, py = e.y;
-                if (clip(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b)) {
-                    intersectPixel(e.x, e.y, a, b);
-                    if (stopped()) return;
-                }
-                continue;
-            }
-            ++stats.nodesVisited;
-            DepthRange range;
-            if (e.g >= tileLevel) {
-                range = hierarchy.gridNode(e.g, e.x, e.y);
-            } else {
-                const int shift = tileLevel - e.g;
-                const std::uint32_t tx = e.x >> shift, ty = e.y >> shift;
-                if (tx != tileX || ty != tileY) {
-                    tile = &hierarchy.tilePyramid(tx, ty);
-                    tileX = tx;
-                    tileY = ty;
-                }
-                range = tile->at(e.g, e.x - (tx << shift), e.y - (ty << shift));
-            }
-            if (range.empty()) continue;
-            // The ray meets [min - zT, max + zT] where its depth 1/w does:
-            // 1/wMin >= lo and 1/wMax <= hi, w > 0.
-            const float wa = w0 + e.ta * dw, wb = w0 + e.tb * dw;
-            const float wMin = std::min(wa, wb) - wError, wMax = std::max(wa, wb) + wError;
-            if (wMin * (range.min - zT) > 1.0f + 1e-5f || wMax * (range.max + zT) < 1.0f - 1e-5f) continue;
-            const int cg = e.g - 1;
-            split(e.ta, e.tb, static_cast<float>(static_cast<double>(std::uint64_t{2 * e.x + 1} << cg) - fx),
-                  static_cast<float>(static_cast<double>(std::uint64_t{2 * e.y + 1} << cg) - fy), 2 * e.x, 2 * e.y, cg);
+        crossed.clear();
+        for (const RayPacket::Pixel* q = packet.pixelsBegin(p.lane); q != packet.pixelsEnd(p.lane); ++q) {
+            double a = p.ua, b = p.ub;
+            const double px = q->x, py = q->y;
+            if (clipRay(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b))
+                crossed.push_back({a, b, q->x, q->y});
+        }
+        // In the order the ray crosses them (few: by insertion).
+        for (std::size_t i = 1; i < crossed.size(); ++i)
+            for (std::size_t j = i; j > 0 && crossed[j].a < crossed[j - 1].a; --j) std::swap(crossed[j], crossed[j - 1]);
+        for (const Crossed& c : crossed) {
+            intersectPixel(c.x, c.y, c.a, c.b);
+            if (stopped()) return;
         }
     }
 
@@ -530,30 +429,44 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     }
 
     s.shared->light.lightSpaceSamples(receiverWorld, options.samples, options.seed, s.lightSamples);
+    // Each light sample's ray to P, cut to [zStart, zEnd] and to the map.
+    const std::size_t n = s.lightSamples.size();
+    s.packetRays.resize(n);
+    for (std::size_t k = 0; k < n; ++k) {
+        Impl::PacketRay& r = s.packetRays[k];
+        r.traced = false;
+        if (!(zStart < zEnd)) continue;
+        const Vec3& q = s.lightSamples[k];
+        auto at = [&](double z) {
+            const double t = (z - d) / (p[2] - d);
+            return Vec3{q[0] + t * (p[0] - q[0]), q[1] + t * (p[1] - q[1]), z};
+        };
+        double ax, ay, bx, by, za, zb;
+        m.camera.lightToRaster(at(zStart), int(m.width), int(m.height), ax, ay, za);
+        m.camera.lightToRaster(at(zEnd), int(m.width), int(m.height), bx, by, zb);
+        r.ray = {ax, ay, bx - ax, by - ay, 1.0 / zStart, 1.0 / zEnd - 1.0 / zStart};
+        r.ua = 0.0;
+        r.ub = 1.0;
+        r.traced = clipRay(r.ray, 0.0, 0.0, m.width, m.height, r.ua, r.ub);
+    }
     double sum[3] = {0.0, 0.0, 0.0};
-    for (const Vec3& q : s.lightSamples) {
-        s.vis[0] = s.vis[1] = s.vis[2] = 1.0;
-        s.consumed = -std::numeric_limits<double>::infinity();
-        ++result.rays;
-        if (zStart < zEnd) {
-            // The ray from the light sample q to P, cut to [zStart, zEnd].
-            auto at = [&](double z) {
-                const double t = (z - d) / (p[2] - d);
-                return Vec3{q[0] + t * (p[0] - q[0]), q[1] + t * (p[1] - q[1]), z};
-            };
-            double ax, ay, bx, by, za, zb;
-            m.camera.lightToRaster(at(zStart), int(m.width), int(m.height), ax, ay, za);
-            m.camera.lightToRaster(at(zEnd), int(m.width), int(m.height), bx, by, zb);
-            s.ray = {ax, ay, bx - ax, by - ay, 1.0 / zStart, 1.0 / zEnd - 1.0 / zStart};
-            double ua = 0.0, ub = 1.0;
-            if (clip(s.ray, 0.0, 0.0, m.width, m.height, ua, ub)) {
+    for (std::size_t first = 0; first < n; first += RayPacket::kLanes) {
+        const std::size_t count = std::min<std::size_t>(RayPacket::kLanes, n - first);
+        if (options.hierarchy) s.tracePacket(first, count);
+        for (std::size_t k = first; k < first + count; ++k) {
+            const Impl::PacketRay& r = s.packetRays[k];
+            s.vis[0] = s.vis[1] = s.vis[2] = 1.0;
+            s.consumed = -std::numeric_limits<double>::infinity();
+            ++result.rays;
+            if (r.traced) {
+                s.ray = r.ray;
                 if (options.hierarchy)
-                    s.walkHierarchy(ua, ub);
+                    s.walkPacketRay(r);
                 else
-                    s.walkPixels(ua, ub);
+                    s.walkPixels(r.ua, r.ub);
             }
+            for (int c = 0; c < 3; ++c) sum[c] += s.vis[c];
         }
-        for (int c = 0; c < 3; ++c) sum[c] += s.vis[c];
     }
     s.stats.rays += static_cast<std::uint64_t>(result.rays);
     for (int c = 0; c < 3; ++c) result.v[static_cast<std::size_t>(c)] = std::clamp(sum[c] / result.rays, 0.0, 1.0);

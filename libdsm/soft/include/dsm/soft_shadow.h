@@ -67,9 +67,10 @@ struct SoftShadowOptions {
     double visibilityThreshold = 1e-3;
     /// Seed of the light samples (AreaLight::samples).
     std::uint64_t seed = 1;
-    /// Walk each ray through the min/max depth quadtree (Xie §4.3), skipping
-    /// nodes the ray passes in front of or behind; false walks every pixel
-    /// the ray crosses. Same result either way.
+    /// Walk the rays through the min/max depth quadtree (Xie §4.3), skipping
+    /// nodes a ray passes in front of or behind: a query's rays (64 at a time)
+    /// go down it together, each node visited once for all of them; false
+    /// walks every pixel each ray crosses. Same result either way.
     bool hierarchy = true;
     /// Penumbra classification and ray shortening (Curtis §3.6-3.7): find the
     /// smallest depth in the part of the map the light's rays to the receiver
@@ -116,7 +117,7 @@ struct SoftShadowStats {
     std::uint64_t queries = 0;
     std::uint64_t classifiedLit = 0;
     std::uint64_t rays = 0;
-    std::uint64_t nodesVisited = 0;   ///< quadtree nodes above pixels
+    std::uint64_t nodesVisited = 0;   ///< quadtree nodes above pixels that rays entered, once per ray
     std::uint64_t pixelsVisited = 0;  ///< pixels whose functions were read
     std::uint64_t samplesHit = 0;     ///< estimated samples that attenuated a ray
     std::uint64_t raysProvenOpaque = 0;  ///< rays stopped by the umbra early-out
