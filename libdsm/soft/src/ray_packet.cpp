@@ -35,15 +35,14 @@ constexpr int kGroup = 4;
 struct ChildBoxes {
     float x[3], y[3];     // column i spans [x[i], x[i + 1]], row j [y[j], y[j + 1]]
     DepthRange range[4];  // of each child
-    bool depthTest;       // children above level 0: test the rays' depths against their ranges
 };
 
 namespace {
 
 // The rays [begin, begin + kGroup) of the packet against the four children:
 // bit k of reached[c] when ray begin + k's stretch in child c (its clip to
-// the child's box, widened by the ray's slack) is not empty and, above level
-// 0, its inverse depth there can meet the child's depth range within zT.
+// the child's box, widened by the ray's slack) is not empty and its inverse
+// depth there can meet the child's depth range within zT.
 template <class Lanes>
 void testGroup(const Lanes& r, int begin, const ChildBoxes& b, float zT, int reached[4]) {
     using detail::Float4;
@@ -73,23 +72,20 @@ void testGroup(const Lanes& r, int begin, const ChildBoxes& b, float zT, int rea
         const int i = c & 1, j = c >> 1;
         const Float4 ta = max4(max4(zero, start[0][i]), start[1][j]);
         const Float4 tb = min4(min4(length, end[0][i]), end[1][j]);
-        Mask4 ok = ta <= tb;
-        if (b.depthTest) {
-            // The ray meets [lo, hi] where its depth 1/w does: 1/wMin >= lo
-            // and 1/wMax <= hi, w > 0.
-            const Float4 wa = w0 + ta * dw, wb = w0 + tb * dw;
-            const Float4 wMin = min4(wa, wb) - wError, wMax = max4(wa, wb) + wError;
-            ok &= ~((wMin * splat4(b.range[c].min - zT) > splat4(1.0f + 1e-5f)) |
-                    (wMax * splat4(b.range[c].max + zT) < splat4(1.0f - 1e-5f)));
-        }
+        // The ray meets [lo, hi] where its depth 1/w does: 1/wMin >= lo and
+        // 1/wMax <= hi, w > 0.
+        const Float4 wa = w0 + ta * dw, wb = w0 + tb * dw;
+        const Float4 wMin = min4(wa, wb) - wError, wMax = max4(wa, wb) + wError;
+        const Mask4 ok = (ta <= tb) & ~((wMin * splat4(b.range[c].min - zT) > splat4(1.0f + 1e-5f)) |
+                                        (wMax * splat4(b.range[c].max + zT) < splat4(1.0f - 1e-5f)));
         reached[c] = laneMask(ok);
     }
 }
 
 }  // namespace
 
-void RayPacket::trace(const DepthHierarchy& hierarchy, const RasterRay* rays, const double* ua, const double* ub,
-                      int count, double zThreshold) {
+void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelDepths, const RasterRay* rays,
+                      const double* ua, const double* ub, int count, double zThreshold) {
     found_.clear();
     nodeVisits_ = 0;
     first_.assign(kLanes + 1, 0);
@@ -185,12 +181,11 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const RasterRay* rays, co
             b.x[i] = static_cast<float>(static_cast<double>(x0 + i) * size - fx);
             b.y[i] = static_cast<float>(static_cast<double>(y0 + i) * size - fy);
         }
-        b.depthTest = g > 0;
         bool inside[4];  // the child lies inside the map
         for (int c = 0; c < 4; ++c) {
             const std::uint32_t cx = x0 + (c & 1), cy = y0 + (c >> 1);
             inside[c] = (std::uint64_t{cx} << g) < width && (std::uint64_t{cy} << g) < height;
-            b.range[c] = inside[c] && g > 0 ? range(g, cx, cy) : DepthRange{-kInf, kInf};
+            if (inside[c]) b.range[c] = g > 0 ? range(g, cx, cy) : pixelDepths(cx, cy);
         }
         std::uint64_t reached[4] = {0, 0, 0, 0};
         for (int group = 0; group < kLanes; group += kGroup) {

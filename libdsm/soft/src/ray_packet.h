@@ -8,6 +8,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "depth_hierarchy.h"
@@ -34,17 +35,21 @@ public:
         std::uint32_t x, y;
     };
 
+    /// The depth range of level-0 pixel (x, y): its first and last vertex
+    /// depths, empty for an empty pixel.
+    using PixelDepths = std::function<DepthRange(std::uint32_t x, std::uint32_t y)>;
+
     /// Traces rays[k] over its stretch [ua[k], ub[k]] (inside the map),
-    /// k < count <= kLanes, down the
-    /// hierarchy from the level whose 2 x 2 nodes hold every ray. Finds for
-    /// each ray the level-0 pixels it may cross where the map's depths may
-    /// meet the ray's within zThreshold: every pixel that a ray traced alone
-    /// down the hierarchy reaches (the tests are the same, in single
-    /// precision widened by a few ulps), and perhaps a few more, which an exact
-    /// test of the pixel rejects. Their order is the packet's, not the ray's.
-    /// May read and decode tiles (through the hierarchy); throws what it throws.
-    void trace(const DepthHierarchy& hierarchy, const RasterRay* rays, const double* ua, const double* ub, int count,
-               double zThreshold);
+    /// k < count <= kLanes, down the hierarchy from the level whose 2 x 2
+    /// nodes hold every ray. Finds for each ray the level-0 pixels it may
+    /// cross where the pixel's depths (pixelDepths, asked once a pixel for
+    /// all the rays) may meet the ray's within zThreshold: every pixel whose
+    /// depth range an exact test finds the ray's to meet, and perhaps a few
+    /// more (the tests are in single precision, widened by a few ulps). Their
+    /// order is the packet's, not the ray's. May read and decode tiles
+    /// (through the hierarchy and pixelDepths); throws what they throw.
+    void trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelDepths, const RasterRay* rays, const double* ua,
+               const double* ub, int count, double zThreshold);
 
     /// The pixels found for ray k by the last trace().
     const Pixel* pixelsBegin(int k) const { return pixels_.data() + first_[static_cast<std::size_t>(k)]; }

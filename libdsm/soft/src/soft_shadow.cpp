@@ -261,6 +261,11 @@ struct SoftShadowContext::Impl {
     RasterRay laneRays[RayPacket::kLanes];
     double laneUa[RayPacket::kLanes], laneUb[RayPacket::kLanes];
     RayPacket packet;
+    // A pixel's depth range, for the packet's last test: read once for all its rays.
+    const RayPacket::PixelDepths pixelDepths = [this](std::uint32_t x, std::uint32_t y) {
+        const VisibilityView f = pixel(x, y);
+        return f.empty() ? DepthRange{} : DepthRange{f.z(0), f.z(f.size() - 1)};
+    };
     struct Crossed {
         double a, b;
         std::uint32_t x, y;
@@ -290,7 +295,7 @@ struct SoftShadowContext::Impl {
             laneUb[lanes] = p.ub;
             ++lanes;
         }
-        packet.trace(*shared->hierarchy, laneRays, laneUa, laneUb, lanes, zThreshold);
+        packet.trace(*shared->hierarchy, pixelDepths, laneRays, laneUa, laneUb, lanes, zThreshold);
         stats.nodesVisited += packet.nodeVisits();
     }
 
