@@ -9,16 +9,17 @@
 
 namespace dsm::detail {
 
-bool clipRay(const RasterRay& r, double x0, double y0, double x1, double y1, double& ua, double& ub) {
-    auto slab = [&](double origin, double direction, double lo, double hi) {
+bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0, double x1, double y1, double& ua,
+             double& ub) {
+    auto slab = [&](double origin, double direction, double perStep, double lo, double hi) {
         if (direction == 0.0) return origin >= lo && origin <= hi;
-        double t0 = (lo - origin) / direction, t1 = (hi - origin) / direction;
+        double t0 = (lo - origin) * perStep, t1 = (hi - origin) * perStep;
         if (t0 > t1) std::swap(t0, t1);
         ua = std::max(ua, t0);
         ub = std::min(ub, t1);
         return true;
     };
-    return slab(r.r0x, r.drx, x0, x1) && slab(r.r0y, r.dry, y0, y1) && ua <= ub;
+    return slab(r.r0x, r.drx, inverse.x, x0, x1) && slab(r.r0y, r.dry, inverse.y, y0, y1) && ua <= ub;
 }
 
 namespace {
@@ -94,19 +95,21 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
     const std::uint32_t width = hierarchy.width(), height = hierarchy.height();
     // The pixels every ray's stretch spans, and the level whose 2 x 2 nodes
     // from (bx0, by0) hold them all (Curtis §3.5, for the packet).
-    const auto pixel = [](double v, std::uint32_t n) {
-        return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
-    };
-    std::uint32_t px0 = width, py0 = height, px1 = 0, py1 = 0;
+    double xMin = std::numeric_limits<double>::infinity(), yMin = xMin, xMax = -xMin, yMax = -xMin;
     for (int k = 0; k < count; ++k) {
         const RasterRay& ray = rays[k];
         const double ax = ray.r0x + ua[k] * ray.drx, bx = ray.r0x + ub[k] * ray.drx;
         const double ay = ray.r0y + ua[k] * ray.dry, by = ray.r0y + ub[k] * ray.dry;
-        px0 = std::min(px0, pixel(std::min(ax, bx), width));
-        px1 = std::max(px1, pixel(std::max(ax, bx), width));
-        py0 = std::min(py0, pixel(std::min(ay, by), height));
-        py1 = std::max(py1, pixel(std::max(ay, by), height));
+        xMin = std::min({xMin, ax, bx});
+        xMax = std::max({xMax, ax, bx});
+        yMin = std::min({yMin, ay, by});
+        yMax = std::max({yMax, ay, by});
     }
+    const auto pixel = [](double v, std::uint32_t n) {
+        return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
+    };
+    const std::uint32_t px0 = pixel(xMin, width), px1 = pixel(xMax, width);
+    const std::uint32_t py0 = pixel(yMin, height), py1 = pixel(yMax, height);
     const int g0 = std::min(std::max(1, static_cast<int>(std::bit_width(std::max(px1 - px0, py1 - py0)))),
                             hierarchy.topLevel());
     const std::uint32_t bx0 = px0 >> g0, by0 = py0 >> g0;

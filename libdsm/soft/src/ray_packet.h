@@ -24,8 +24,19 @@ struct RasterRay {
     double z(double u) const { return 1.0 / (invZ0 + u * dInvZ); }
 };
 
+/// 1 / the raster steps of a ray (infinite along an axis it does not move
+/// on), worked out once for a ray clipped to many boxes.
+struct RayInverse {
+    explicit RayInverse(const RasterRay& r) : x(1.0 / r.drx), y(1.0 / r.dry) {}
+    double x, y;
+};
+
 /// Clips [ua, ub] to the part of the ray inside the closed box; false if none.
-DSM_TESTED_INTERNAL bool clipRay(const RasterRay& r, double x0, double y0, double x1, double y1, double& ua, double& ub);
+DSM_TESTED_INTERNAL bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0, double x1,
+                                 double y1, double& ua, double& ub);
+inline bool clipRay(const RasterRay& r, double x0, double y0, double x1, double y1, double& ua, double& ub) {
+    return clipRay(r, RayInverse(r), x0, y0, x1, y1, ua, ub);
+}
 
 class DSM_TESTED_INTERNAL RayPacket {
 public:

@@ -64,22 +64,43 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double l
         deepest = z1;
         return count;
     }
+    // Most segments a ray's depth range reaches end before it or begin
+    // beyond it: ruled out before any division (depth(1) >= z0).
+    if (!after(z1) || z0 > hi) return 0;
     const double h = (z1 - z0) / static_cast<double>(count);
     auto depth = [&](std::uint64_t k) { return k >= count ? z1 : z0 + static_cast<double>(k) * h; };
-    if (!after(z1) || depth(1) > hi) return 0;
-    // First guesses by division, then fixed up against the depths themselves
-    // (rounding may put them one off).
-    const double c = static_cast<double>(count);
-    auto first = static_cast<std::uint64_t>(std::clamp(std::ceil((from - z0) / h), 1.0, c));
+    if (depth(1) > hi) return 0;
+    // First guesses (by one reciprocal), then fixed up against the depths
+    // themselves (rounding may put them one off).
+    const double c = static_cast<double>(count), perDepth = 1.0 / h;
+    auto first = static_cast<std::uint64_t>(std::clamp(std::ceil((from - z0) * perDepth), 1.0, c));
     while (first > 1 && after(depth(first - 1))) --first;
     while (first < count && !after(depth(first))) ++first;
-    auto last = static_cast<std::uint64_t>(std::clamp(std::floor((hi - z0) / h), 1.0, c));
+    auto last = static_cast<std::uint64_t>(std::clamp(std::floor((hi - z0) * perDepth), 1.0, c));
     while (last < count && depth(last + 1) <= hi) ++last;
     while (last > 1 && depth(last) > hi) --last;
     if (last < first || depth(last) > hi || !after(depth(first))) return 0;
     deepest = depth(last);
     return last - first + 1;
 }
+
+// Raster positions of light-space points at one depth, as
+// LightCamera::lightToRaster() gives them (to rounding), with its divisions
+// done once for every point at that depth.
+struct RasterAtDepth {
+    RasterAtDepth(const MapInfo& m, double z) {
+        const auto& w = m.camera.screenWindow;
+        const double kx = m.width / (w[1] - w[0]), ky = m.height / (w[3] - w[2]);
+        const double perDepth = m.camera.projection == Projection::Perspective ? 1.0 / z : 1.0;
+        sx = kx * perDepth;
+        ox = -w[0] * kx;
+        sy = -ky * perDepth;
+        oy = w[3] * ky;
+    }
+    double x(double lightX) const { return lightX * sx + ox; }
+    double y(double lightY) const { return lightY * sy + oy; }
+    double sx, ox, sy, oy;
+};
 
 }  // namespace
 
@@ -252,6 +273,7 @@ struct SoftShadowContext::Impl {
     // them. A ray within one pixel reads it alone.
     struct PacketRay {
         RasterRay ray;
+        detail::RayInverse inverse{ray};
         double ua = 0.0, ub = 0.0;
         bool traced = false;             // crosses the map
         int lane = -1;                   // in the packet, or -1
@@ -310,7 +332,8 @@ struct SoftShadowContext::Impl {
         for (const RayPacket::Pixel* q = packet.pixelsBegin(p.lane); q != packet.pixelsEnd(p.lane); ++q) {
             double a = p.ua, b = p.ub;
             const double px = q->x, py = q->y;
-            if (clipRay(ray, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a, b))
+            if (clipRay(ray, p.inverse, px, py, std::min(px + 1.0, double(m.width)), std::min(py + 1.0, double(m.height)), a,
+                        b))
                 crossed.push_back({a, b, q->x, q->y});
         }
         // In the order the ray crosses them (few: by insertion).
@@ -434,25 +457,25 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     }
 
     s.shared->light.lightSpaceSamples(receiverWorld, options.samples, options.seed, s.lightSamples);
-    // Each light sample's ray to P, cut to [zStart, zEnd] and to the map.
+    // Each light sample's ray to P, cut to [zStart, zEnd] and to the map: its
+    // ends are points at those two depths, projected with the divisions
+    // done once for every ray.
     const std::size_t n = s.lightSamples.size();
     s.packetRays.resize(n);
+    const RasterAtDepth start(m, zStart), end(m, zEnd);
+    const double tStart = (zStart - d) / (p[2] - d), tEnd = (zEnd - d) / (p[2] - d);
     for (std::size_t k = 0; k < n; ++k) {
         Impl::PacketRay& r = s.packetRays[k];
         r.traced = false;
         if (!(zStart < zEnd)) continue;
         const Vec3& q = s.lightSamples[k];
-        auto at = [&](double z) {
-            const double t = (z - d) / (p[2] - d);
-            return Vec3{q[0] + t * (p[0] - q[0]), q[1] + t * (p[1] - q[1]), z};
-        };
-        double ax, ay, bx, by, za, zb;
-        m.camera.lightToRaster(at(zStart), int(m.width), int(m.height), ax, ay, za);
-        m.camera.lightToRaster(at(zEnd), int(m.width), int(m.height), bx, by, zb);
+        const double ax = start.x(q[0] + tStart * (p[0] - q[0])), ay = start.y(q[1] + tStart * (p[1] - q[1]));
+        const double bx = end.x(q[0] + tEnd * (p[0] - q[0])), by = end.y(q[1] + tEnd * (p[1] - q[1]));
         r.ray = {ax, ay, bx - ax, by - ay, 1.0 / zStart, 1.0 / zEnd - 1.0 / zStart};
+        r.inverse = detail::RayInverse(r.ray);
         r.ua = 0.0;
         r.ub = 1.0;
-        r.traced = clipRay(r.ray, 0.0, 0.0, m.width, m.height, r.ua, r.ub);
+        r.traced = clipRay(r.ray, r.inverse, 0.0, 0.0, m.width, m.height, r.ua, r.ub);
     }
     double sum[3] = {0.0, 0.0, 0.0};
     for (std::size_t first = 0; first < n; first += RayPacket::kLanes) {
