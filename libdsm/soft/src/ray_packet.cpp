@@ -5,7 +5,7 @@
 #include <cmath>
 #include <limits>
 
-#include "float4.h"
+#include "float8.h"
 
 namespace dsm::detail {
 
@@ -25,65 +25,59 @@ bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0
 namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
-// Rays are tested four at a time; a group of four without a ray in the node is
-// skipped.
-constexpr int kGroup = 4;
+// Rays are tested eight at a time; a group of eight without a ray in the node
+// is skipped.
+constexpr int kGroup = 8;
 
 }  // namespace
 
 // The four children of a node, children[j * 2 + i] = child (2x + i, 2y + j):
 // their bounds in the frame and their depth ranges.
-struct ChildBoxes {
+struct RayPacket::ChildBoxes {
     float x[3], y[3];     // column i spans [x[i], x[i + 1]], row j [y[j], y[j + 1]]
     DepthRange range[4];  // of each child
 };
 
-namespace {
-
-// The rays [begin, begin + kGroup) of the packet against the four children:
-// bit k of reached[c] when ray begin + k's stretch in child c (its clip to
-// the child's box, widened by the ray's slack) is not empty and its inverse
-// depth there can meet the child's depth range within zT.
-template <class Lanes>
-void testGroup(const Lanes& r, int begin, const ChildBoxes& b, float zT, int reached[4]) {
-    using detail::Float4;
-    const Float4 inf = splat4(kInf), zero = splat4(0.0f);
-    Float4 start[2][2], end[2][2];  // [axis][half]
+// Compiled for AVX2 too (chosen when the processor has it): eight lanes are
+// one register there, two elsewhere.
+__attribute__((target_clones("avx2", "default"))) void RayPacket::testGroup(const Lanes& r, int begin,
+                                                                            const ChildBoxes& b, float zT,
+                                                                            int reached[4]) {
+    const Float8 inf = splat8(kInf), zero = splat8(0.0f);
+    Float8 start[2][2], end[2][2];  // [axis][half]
     for (int axis = 0; axis < 2; ++axis) {
         const float* bounds = axis == 0 ? b.x : b.y;
-        const Float4 origin = load4((axis == 0 ? r.ox : r.oy) + begin);
-        const Float4 inverse = load4((axis == 0 ? r.invDx : r.invDy) + begin);
-        const Float4 slack = load4((axis == 0 ? r.slackX : r.slackY) + begin);
-        const Float4 low = load4((axis == 0 ? r.lowX : r.lowY) + begin);
-        const Float4 high = load4((axis == 0 ? r.highX : r.highY) + begin);
-        const Mask4 fixed = load4((axis == 0 ? r.fixedX : r.fixedY) + begin) != zero;
-        Float4 t[3];
-        for (int i = 0; i < 3; ++i) t[i] = (splat4(bounds[i]) - origin) * inverse;
+        const Float8 origin = load8((axis == 0 ? r.ox : r.oy) + begin);
+        const Float8 inverse = load8((axis == 0 ? r.invDx : r.invDy) + begin);
+        const Float8 slack = load8((axis == 0 ? r.slackX : r.slackY) + begin);
+        const Float8 low = load8((axis == 0 ? r.lowX : r.lowY) + begin);
+        const Float8 high = load8((axis == 0 ? r.highX : r.highY) + begin);
+        const Mask8 fixed = load8((axis == 0 ? r.fixedX : r.fixedY) + begin) != zero;
+        Float8 t[3];
+        for (int i = 0; i < 3; ++i) t[i] = (splat8(bounds[i]) - origin) * inverse;
         for (int half = 0; half < 2; ++half) {
-            const Float4 moving0 = min4(t[half], t[half + 1]) - slack, moving1 = max4(t[half], t[half + 1]) + slack;
+            const Float8 moving0 = min8(t[half], t[half + 1]) - slack, moving1 = max8(t[half], t[half + 1]) + slack;
             // A ray fixed along the axis meets the half where its span does.
-            const Mask4 meets = (low <= splat4(bounds[half + 1])) & (high >= splat4(bounds[half]));
+            const Mask8 meets = (low <= splat8(bounds[half + 1])) & (high >= splat8(bounds[half]));
             start[axis][half] = fixed ? (meets ? -inf : inf) : moving0;
             end[axis][half] = fixed ? (meets ? inf : -inf) : moving1;
         }
     }
-    const Float4 length = load4(r.length + begin);
-    const Float4 w0 = load4(r.w0 + begin), dw = load4(r.dw + begin), wError = load4(r.wError + begin);
+    const Float8 length = load8(r.length + begin);
+    const Float8 w0 = load8(r.w0 + begin), dw = load8(r.dw + begin), wError = load8(r.wError + begin);
     for (int c = 0; c < 4; ++c) {
         const int i = c & 1, j = c >> 1;
-        const Float4 ta = max4(max4(zero, start[0][i]), start[1][j]);
-        const Float4 tb = min4(min4(length, end[0][i]), end[1][j]);
+        const Float8 ta = max8(max8(zero, start[0][i]), start[1][j]);
+        const Float8 tb = min8(min8(length, end[0][i]), end[1][j]);
         // The ray meets [lo, hi] where its depth 1/w does: 1/wMin >= lo and
         // 1/wMax <= hi, w > 0.
-        const Float4 wa = w0 + ta * dw, wb = w0 + tb * dw;
-        const Float4 wMin = min4(wa, wb) - wError, wMax = max4(wa, wb) + wError;
-        const Mask4 ok = (ta <= tb) & ~((wMin * splat4(b.range[c].min - zT) > splat4(1.0f + 1e-5f)) |
-                                        (wMax * splat4(b.range[c].max + zT) < splat4(1.0f - 1e-5f)));
+        const Float8 wa = w0 + ta * dw, wb = w0 + tb * dw;
+        const Float8 wMin = min8(wa, wb) - wError, wMax = max8(wa, wb) + wError;
+        const Mask8 ok = (ta <= tb) & ~((wMin * splat8(b.range[c].min - zT) > splat8(1.0f + 1e-5f)) |
+                                        (wMax * splat8(b.range[c].max + zT) < splat8(1.0f - 1e-5f)));
         reached[c] = laneMask(ok);
     }
 }
-
-}  // namespace
 
 void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelDepths, const RasterRay* rays,
                       const double* ua, const double* ub, int count, double zThreshold) {

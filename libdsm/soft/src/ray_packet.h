@@ -85,6 +85,13 @@ private:
         float length[kLanes];                          // ub - ua
         float w0[kLanes], dw[kLanes], wError[kLanes];  // inverse depth at ua, its change, its rounding
     };
+    struct ChildBoxes;
+    // Rays [begin, begin + 8) against the four children of a node: bit k of
+    // reached[c] when ray begin + k's stretch in child c (its clip to the
+    // child's box, widened by the ray's slack) is not empty and its inverse
+    // depth there can meet the child's depth range within zT.
+    static void testGroup(const Lanes& r, int begin, const ChildBoxes& b, float zT, int reached[4]);
+
     Lanes lanes_;
     std::vector<Found> found_;
     std::vector<Pixel> pixels_;
