@@ -70,9 +70,10 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double l
     const double h = (z1 - z0) / static_cast<double>(count);
     auto depth = [&](std::uint64_t k) { return k >= count ? z1 : z0 + static_cast<double>(k) * h; };
     if (depth(1) > hi) return 0;
-    // First guesses (by one reciprocal), then fixed up against the depths
-    // themselves (rounding may put them one off).
-    const double c = static_cast<double>(count), perDepth = 1.0 / h;
+    // First guesses (samples per unit of depth, a division beside h's rather
+    // than after it), then fixed up against the depths themselves (rounding
+    // may put them one off).
+    const double c = static_cast<double>(count), perDepth = c / (z1 - z0);
     auto first = static_cast<std::uint64_t>(std::clamp(std::ceil((from - z0) * perDepth), 1.0, c));
     while (first > 1 && after(depth(first - 1))) --first;
     while (first < count && !after(depth(first))) ++first;
@@ -220,7 +221,7 @@ struct SoftShadowContext::Impl {
     // the ray may already carry colour from RGB pixels it crossed before.
     void attenuate(const VisibilityView& f, std::size_t i, std::size_t layerBegin, std::uint64_t hits,
                    std::uint64_t count) {
-        const double share = static_cast<double>(hits) / static_cast<double>(count);
+        const double share = hits == count ? 1.0 : static_cast<double>(hits) / static_cast<double>(count);
         const bool mono = f.channels() == 1;
         for (int c = 0; c < 3; ++c) {
             const int stored = mono ? 0 : c;
