@@ -20,6 +20,23 @@ using detail::concat;
 
 namespace {
 
+// sin and cos of |t| <= pi/4 by their Taylor series to t^15 and t^16, whose
+// first omitted terms are below 5e-17 there: within a few ulps of the
+// library's, at a fraction of the cost of its general argument reduction (a
+// query draws a sample a ray).
+void sinCosQuarter(double t, double& sine, double& cosine) {
+    const double t2 = t * t;
+    double s = 1.0 / 1307674368000.0, c = 1.0 / 20922789888000.0;  // 1/15!, 1/16!
+    constexpr double kSine[] = {-1.0 / 6227020800.0, 1.0 / 39916800.0, -1.0 / 362880.0, 1.0 / 5040.0,
+                                -1.0 / 120.0,        1.0 / 6.0,        -1.0};  // 1/13! .. 1/1!, alternating
+    constexpr double kCosine[] = {-1.0 / 87178291200.0, 1.0 / 479001600.0, -1.0 / 3628800.0, 1.0 / 40320.0,
+                                  -1.0 / 720.0,         1.0 / 24.0,        -1.0 / 2.0,       1.0};  // 1/14! .. 1/0!
+    for (double k : kSine) s = s * t2 + k;
+    for (double k : kCosine) c = c * t2 + k;
+    sine = -s * t;
+    cosine = c;
+}
+
 // Shirley & Chiu's concentric map from [0,1)^2 to the unit disk: keeps
 // neighbouring strata neighbours, unlike the polar map.
 void concentricDisk(double u, double v, double& x, double& y) {
@@ -28,16 +45,18 @@ void concentricDisk(double u, double v, double& x, double& y) {
         x = y = 0.0;
         return;
     }
-    double r, phi;
+    // The angle pi/4 (b/a) from the x axis, or pi/2 - pi/4 (a/b): cos and sin
+    // of the second are sin and cos of pi/4 (a/b).
+    double sine, cosine;
     if (std::abs(a) > std::abs(b)) {
-        r = a;
-        phi = (std::numbers::pi / 4.0) * (b / a);
+        sinCosQuarter((std::numbers::pi / 4.0) * (b / a), sine, cosine);
+        x = a * cosine;
+        y = a * sine;
     } else {
-        r = b;
-        phi = (std::numbers::pi / 2.0) - (std::numbers::pi / 4.0) * (a / b);
+        sinCosQuarter((std::numbers::pi / 4.0) * (a / b), sine, cosine);
+        x = b * sine;
+        y = b * cosine;
     }
-    x = r * std::cos(phi);
-    y = r * std::sin(phi);
 }
 
 }  // namespace
