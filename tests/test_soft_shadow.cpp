@@ -376,21 +376,24 @@ TEST_F(SoftShadow, HierarchyWalksTheSamePixelsAsTheWalkForRaysInEveryDirection) 
     // Receivers on a grid across the umbra, penumbra and lit floor, every ray
     // traced (classification off, so rays start at the light and cross the
     // map from the centre outwards in every direction, some of them along a
-    // raster axis), with and without a z threshold.
+    // raster axis), with and without a z threshold; the rays go down the
+    // hierarchy 64 at a time, so 1, 64 and 150 of them (two full packets and
+    // a part).
     dsm::SoftShadowContext context(square_->tracer);
-    for (const double threshold : {0.0, 0.05})
-        for (double x = -3.0; x <= 3.0; x += 0.75)
-            for (double z = -3.0; z <= 3.0; z += 1.5) {
-                dsm::SoftShadowOptions tree = withSamples(64);
-                tree.classification = false;
-                tree.zThreshold = threshold;
-                tree.bias = kBias + threshold;
-                dsm::SoftShadowOptions walk = tree;
-                walk.hierarchy = false;
-                const Vec3 p{x, 0.0, z};
-                EXPECT_NEAR(context.visibility(p, tree).v[0], context.visibility(p, walk).v[0], 1e-9)
-                    << "receiver " << x << "," << z << " threshold " << threshold;
-            }
+    for (const int samples : {1, 64, 150})
+        for (const double threshold : {0.0, 0.05})
+            for (double x = -3.0; x <= 3.0; x += 0.75)
+                for (double z = -3.0; z <= 3.0; z += 1.5) {
+                    dsm::SoftShadowOptions tree = withSamples(samples);
+                    tree.classification = false;
+                    tree.zThreshold = threshold;
+                    tree.bias = kBias + threshold;
+                    dsm::SoftShadowOptions walk = tree;
+                    walk.hierarchy = false;
+                    const Vec3 p{x, 0.0, z};
+                    EXPECT_NEAR(context.visibility(p, tree).v[0], context.visibility(p, walk).v[0], 1e-9)
+                        << "receiver " << x << "," << z << " threshold " << threshold << ", " << samples << " rays";
+                }
 }
 
 TEST_F(SoftShadow, UmbraEarlyOutStopsOpaqueRaysWithoutChangingTheAnswer) {
