@@ -1,7 +1,9 @@
 // Eight floats as one SIMD value (internal), through the compiler's vector
 // extensions: one AVX register in code compiled for AVX, two SSE (or NEON)
-// registers otherwise; and the lane mask a comparison of two of them gives.
-// For tests of eight rays at a time.
+// registers otherwise. For tests of eight rays at a time. Keep them in local
+// variables and pass them by reference: a call that takes or returns one by
+// value is made differently with and without AVX, and clang refuses it in
+// code built without.
 #pragma once
 
 #include <cstdint>
@@ -11,30 +13,13 @@
 #include <emmintrin.h>
 #endif
 
-// The helpers are always inlined, into code compiled for AVX or not: eight
-// floats never cross a call, so how a call would pass them (GCC's -Wpsabi
-// note, silenced where this is included) does not matter.
-
 namespace dsm::detail {
 
 using Float8 = float __attribute__((vector_size(32)));
 using Mask8 = std::int32_t __attribute__((vector_size(32)));
 
-[[gnu::always_inline]] inline Float8 splat8(float v) { return Float8{v, v, v, v, v, v, v, v}; }
-
-[[gnu::always_inline]] inline Float8 load8(const float* p) {
-    Float8 v;
-    std::memcpy(&v, p, sizeof v);
-    return v;
-}
-
-/// The lane-wise minimum and maximum (the processor's min and max: for
-/// ordered operands, which is all these take).
-[[gnu::always_inline]] inline Float8 min8(Float8 a, Float8 b) { return a < b ? a : b; }
-[[gnu::always_inline]] inline Float8 max8(Float8 a, Float8 b) { return a > b ? a : b; }
-
 /// Bit l set when lane l of a comparison is true.
-[[gnu::always_inline]] inline int laneMask(Mask8 m) {
+inline int laneMask(const Mask8& m) {
 #ifdef __SSE2__
     __m128 low, high;
     std::memcpy(&low, &m, sizeof low);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
+#include <cstring>
 #include <limits>
 
 #include "float8.h"
@@ -39,42 +40,52 @@ struct RayPacket::ChildBoxes {
 };
 
 // Compiled for AVX2 too (chosen when the processor has it): eight lanes are
-// one register there, two elsewhere.
+// one register there, two elsewhere. Eight-float values stay local here: no
+// call takes or returns one, since such a call is made differently with and
+// without AVX (clang refuses it in the code built without; see float8.h).
 __attribute__((target_clones("avx2", "default"))) void RayPacket::testGroup(const Lanes& r, int begin,
                                                                             const ChildBoxes& b, float zT,
                                                                             int reached[4]) {
-    const Float8 inf = splat8(kInf), zero = splat8(0.0f);
+    const Float8 zero{}, inf = zero + kInf;
     Float8 start[2][2], end[2][2];  // [axis][half]
     for (int axis = 0; axis < 2; ++axis) {
         const float* bounds = axis == 0 ? b.x : b.y;
-        const Float8 origin = load8((axis == 0 ? r.ox : r.oy) + begin);
-        const Float8 inverse = load8((axis == 0 ? r.invDx : r.invDy) + begin);
-        const Float8 slack = load8((axis == 0 ? r.slackX : r.slackY) + begin);
-        const Float8 low = load8((axis == 0 ? r.lowX : r.lowY) + begin);
-        const Float8 high = load8((axis == 0 ? r.highX : r.highY) + begin);
-        const Mask8 fixed = load8((axis == 0 ? r.fixedX : r.fixedY) + begin) != zero;
+        Float8 origin, inverse, slack, low, high, fixedFlags;
+        std::memcpy(&origin, (axis == 0 ? r.ox : r.oy) + begin, sizeof origin);
+        std::memcpy(&inverse, (axis == 0 ? r.invDx : r.invDy) + begin, sizeof inverse);
+        std::memcpy(&slack, (axis == 0 ? r.slackX : r.slackY) + begin, sizeof slack);
+        std::memcpy(&low, (axis == 0 ? r.lowX : r.lowY) + begin, sizeof low);
+        std::memcpy(&high, (axis == 0 ? r.highX : r.highY) + begin, sizeof high);
+        std::memcpy(&fixedFlags, (axis == 0 ? r.fixedX : r.fixedY) + begin, sizeof fixedFlags);
+        const Mask8 fixed = fixedFlags != zero;
         Float8 t[3];
-        for (int i = 0; i < 3; ++i) t[i] = (splat8(bounds[i]) - origin) * inverse;
+        for (int i = 0; i < 3; ++i) t[i] = (zero + bounds[i] - origin) * inverse;
         for (int half = 0; half < 2; ++half) {
-            const Float8 moving0 = min8(t[half], t[half + 1]) - slack, moving1 = max8(t[half], t[half + 1]) + slack;
+            const Float8 p = t[half], q = t[half + 1];
+            const Float8 moving0 = (p < q ? p : q) - slack, moving1 = (p > q ? p : q) + slack;
             // A ray fixed along the axis meets the half where its span does.
-            const Mask8 meets = (low <= splat8(bounds[half + 1])) & (high >= splat8(bounds[half]));
+            const Mask8 meets = (low <= zero + bounds[half + 1]) & (high >= zero + bounds[half]);
             start[axis][half] = fixed ? (meets ? -inf : inf) : moving0;
             end[axis][half] = fixed ? (meets ? inf : -inf) : moving1;
         }
     }
-    const Float8 length = load8(r.length + begin);
-    const Float8 w0 = load8(r.w0 + begin), dw = load8(r.dw + begin), wError = load8(r.wError + begin);
+    Float8 length, w0, dw, wError;
+    std::memcpy(&length, r.length + begin, sizeof length);
+    std::memcpy(&w0, r.w0 + begin, sizeof w0);
+    std::memcpy(&dw, r.dw + begin, sizeof dw);
+    std::memcpy(&wError, r.wError + begin, sizeof wError);
     for (int c = 0; c < 4; ++c) {
         const int i = c & 1, j = c >> 1;
-        const Float8 ta = max8(max8(zero, start[0][i]), start[1][j]);
-        const Float8 tb = min8(min8(length, end[0][i]), end[1][j]);
+        Float8 ta = zero > start[0][i] ? zero : start[0][i];
+        ta = ta > start[1][j] ? ta : start[1][j];
+        Float8 tb = length < end[0][i] ? length : end[0][i];
+        tb = tb < end[1][j] ? tb : end[1][j];
         // The ray meets [lo, hi] where its depth 1/w does: 1/wMin >= lo and
         // 1/wMax <= hi, w > 0.
         const Float8 wa = w0 + ta * dw, wb = w0 + tb * dw;
-        const Float8 wMin = min8(wa, wb) - wError, wMax = max8(wa, wb) + wError;
-        const Mask8 ok = (ta <= tb) & ~((wMin * splat8(b.range[c].min - zT) > splat8(1.0f + 1e-5f)) |
-                                        (wMax * splat8(b.range[c].max + zT) < splat8(1.0f - 1e-5f)));
+        const Float8 wMin = (wa < wb ? wa : wb) - wError, wMax = (wa > wb ? wa : wb) + wError;
+        const Mask8 ok = (ta <= tb) & ~((wMin * (b.range[c].min - zT) > zero + (1.0f + 1e-5f)) |
+                                        (wMax * (b.range[c].max + zT) < zero + (1.0f - 1e-5f)));
         reached[c] = laneMask(ok);
     }
 }
@@ -108,9 +119,9 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
                             hierarchy.topLevel());
     const std::uint32_t bx0 = px0 >> g0, by0 = py0 >> g0;
     const double fx = static_cast<double>(std::uint64_t{bx0} << g0), fy = static_cast<double>(std::uint64_t{by0} << g0);
-    // Rounding bounds, as a ray traced alone: positions in the frame are
-    // below 2^(g0+2), so a few ulps of that in raster units; inverse depths a
-    // few ulps of their largest term.
+    // Rounding bounds: positions in the frame are below 2^(g0+2), so a few
+    // ulps of that in raster units; inverse depths a few ulps of their
+    // largest term.
     const float delta = 2e-6f * static_cast<float>(std::uint64_t{1} << g0);
     Lanes& r = lanes_;
     for (int l = 0; l < kLanes; ++l) {
@@ -213,8 +224,8 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
     for (const Found& f : found_) ++first_[f.lane + 1];
     for (int k = 0; k < kLanes; ++k) first_[static_cast<std::size_t>(k) + 1] += first_[static_cast<std::size_t>(k)];
     pixels_.resize(found_.size());
-    std::vector<std::size_t> next(first_.begin(), first_.end() - 1);
-    for (const Found& f : found_) pixels_[next[f.lane]++] = f.pixel;
+    next_.assign(first_.begin(), first_.end() - 1);
+    for (const Found& f : found_) pixels_[next_[f.lane]++] = f.pixel;
 }
 
 }  // namespace dsm::detail

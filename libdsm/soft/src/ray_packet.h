@@ -95,7 +95,7 @@ private:
     Lanes lanes_;
     std::vector<Found> found_;
     std::vector<Pixel> pixels_;
-    std::vector<std::size_t> first_;
+    std::vector<std::size_t> first_, next_;  // each ray's first pixel; the next free slot while filing
     std::uint64_t nodeVisits_ = 0;
 };
 
