@@ -322,7 +322,7 @@ struct SoftShadowContext::Impl {
         stats.nodesVisited += packet.nodeVisits();
     }
 
-    // The ray of packetRays[k] (set as `ray`) through the pixels the packet found.
+    // Ray p (already set as `ray`) through the pixels the packet found for it.
     void walkPacketRay(const PacketRay& p) {
         const MapInfo& m = info();
         if (p.lane < 0) {
