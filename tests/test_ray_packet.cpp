@@ -24,6 +24,7 @@ namespace {
 
 using dsm::detail::clipRay;
 using dsm::detail::RasterRay;
+using dsm::detail::RayInverse;
 using dsm::detail::RayPacket;
 
 // A 75 x 53 map of 8 x 8 tiles (so the hierarchy has levels in the tiles and
@@ -104,7 +105,7 @@ TEST(RayPacket, FindsEveryPixelWhoseDepthsMeetTheRay) {
         while (static_cast<int>(rays.size()) < count) {
             const RasterRay r = randomRay(rng);
             double a = 0.0, b = 1.0;
-            if (!clipRay(r, 0.0, 0.0, W, H, a, b)) continue;
+            if (!clipRay(r, RayInverse(r), 0.0, 0.0, W, H, a, b)) continue;
             // Now and then a part of it only.
             if (rng() % 4 == 0) a += (b - a) * 0.5;
             rays.push_back(r);
@@ -113,6 +114,7 @@ TEST(RayPacket, FindsEveryPixelWhoseDepthsMeetTheRay) {
         }
         packet.trace(hierarchy, pixelDepths, rays.data(), ua.data(), ub.data(), count, zThreshold);
         for (int k = 0; k < count; ++k) {
+            const RayInverse inverse(rays[k]);
             std::set<std::pair<std::uint32_t, std::uint32_t>> pixels;
             for (const RayPacket::Pixel* p = packet.pixelsBegin(k); p != packet.pixelsEnd(k); ++p) {
                 ASSERT_LT(p->x, W);
@@ -123,7 +125,7 @@ TEST(RayPacket, FindsEveryPixelWhoseDepthsMeetTheRay) {
             for (std::uint32_t y = 0; y < H; ++y)
                 for (std::uint32_t x = 0; x < W; ++x) {
                     double a = ua[k], b = ub[k];
-                    if (!clipRay(rays[k], x, y, std::min(x + 1.0, double(W)), std::min(y + 1.0, double(H)), a, b))
+                    if (!clipRay(rays[k], inverse, x, y, std::min(x + 1.0, double(W)), std::min(y + 1.0, double(H)), a, b))
                         continue;
                     ++crossed;
                     // As a ray's read of a pixel tests it first.
@@ -155,15 +157,16 @@ TEST(RayPacket, ClipsToTheClosedBox) {
     r.drx = 4.0;
     r.dry = 0.0;
     double a = 0.0, b = 1.0;
-    ASSERT_TRUE(clipRay(r, 0.0, 0.0, 2.0, 1.0, a, b));
+    const RayInverse inverse(r);
+    ASSERT_TRUE(clipRay(r, inverse, 0.0, 0.0, 2.0, 1.0, a, b));
     EXPECT_DOUBLE_EQ(a, 0.25);
     EXPECT_DOUBLE_EQ(b, 0.75);
     a = 0.0;
     b = 1.0;
-    EXPECT_FALSE(clipRay(r, 0.0, 0.6, 2.0, 1.0, a, b));  // parallel to the box's edge, outside it
+    EXPECT_FALSE(clipRay(r, inverse, 0.0, 0.6, 2.0, 1.0, a, b));  // parallel to the box's edge, outside it
     a = 0.0;
     b = 1.0;
-    EXPECT_TRUE(clipRay(r, 3.0, 0.5, 4.0, 1.0, a, b));   // touching the box's edge
+    EXPECT_TRUE(clipRay(r, inverse, 3.0, 0.5, 4.0, 1.0, a, b));   // touching the box's edge
     EXPECT_DOUBLE_EQ(a, 1.0);
     EXPECT_DOUBLE_EQ(b, 1.0);
 }

@@ -8,7 +8,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-#include "double2.h"
+#include "simd_lanes.h"
 
 DSM_NAMESPACE_BEGIN
 

@@ -6,7 +6,7 @@
 #include <utility>
 #include <vector>
 
-#include "double2.h"
+#include "simd_lanes.h"
 #include "dsm/error.h"
 #include "text.h"
 

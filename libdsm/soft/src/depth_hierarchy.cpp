@@ -102,10 +102,8 @@ float DepthHierarchy::minDepth(double x0, double y0, double x1, double y1) const
     float best = std::numeric_limits<float>::infinity();
     const double W = width_, H = height_;
     if (!(x1 >= 0.0 && y1 >= 0.0 && x0 <= W && y0 <= H)) return best;
-    const auto pixel = [](double v, std::uint32_t n) {
-        return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
-    };
-    const PixelRect rect{pixel(x0, width_), pixel(y0, height_), pixel(x1, width_), pixel(y1, height_)};
+    const PixelRect rect{clampedPixel(x0, width_), clampedPixel(y0, height_), clampedPixel(x1, width_),
+                          clampedPixel(y1, height_)};
     // The tiles the rectangle's edge crosses are looked into last, nearest
     // first, and only while they can still lower the bound: the tile
     // directory settles the rest, and a tile never reached is never decoded.

@@ -13,7 +13,9 @@
 //  - g = 0: the pixel itself, which the caller reads anyway.
 #pragma once
 
+#include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdint>
 #include <limits>
 #include <memory>
@@ -23,6 +25,12 @@
 #include "tested_internal.h"
 
 namespace dsm::detail {
+
+/// The pixel holding raster coordinate v along an axis of n pixels, clamped
+/// to the axis.
+inline std::uint32_t clampedPixel(double v, std::uint32_t n) {
+    return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
+}
 
 struct DepthRange {
     float min = std::numeric_limits<float>::infinity();

@@ -6,7 +6,7 @@
 #include <cstring>
 #include <limits>
 
-#include "float8.h"
+#include "simd_lanes.h"
 
 namespace dsm::detail {
 
@@ -42,7 +42,7 @@ struct RayPacket::ChildBoxes {
 // Compiled for AVX2 too (chosen when the processor has it): eight lanes are
 // one register there, two elsewhere. Eight-float values stay local here: no
 // call takes or returns one, since such a call is made differently with and
-// without AVX (clang refuses it in the code built without; see float8.h).
+// without AVX (clang refuses it in the code built without; see simd_lanes.h).
 __attribute__((target_clones("avx2", "default"))) void RayPacket::testGroup(const Lanes& r, int begin,
                                                                             const ChildBoxes& b, float zT,
                                                                             int reached[4]) {
@@ -110,11 +110,8 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
         yMin = std::min({yMin, ay, by});
         yMax = std::max({yMax, ay, by});
     }
-    const auto pixel = [](double v, std::uint32_t n) {
-        return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
-    };
-    const std::uint32_t px0 = pixel(xMin, width), px1 = pixel(xMax, width);
-    const std::uint32_t py0 = pixel(yMin, height), py1 = pixel(yMax, height);
+    const std::uint32_t px0 = clampedPixel(xMin, width), px1 = clampedPixel(xMax, width);
+    const std::uint32_t py0 = clampedPixel(yMin, height), py1 = clampedPixel(yMax, height);
     const int g0 = std::min(std::max(1, static_cast<int>(std::bit_width(std::max(px1 - px0, py1 - py0)))),
                             hierarchy.topLevel());
     const std::uint32_t bx0 = px0 >> g0, by0 = py0 >> g0;
@@ -164,20 +161,6 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
     };
     Node stack[4 * 66];
     int top = 0;
-    const int tileLevel = hierarchy.tileLevel();
-    const detail::DepthHierarchy::TilePyramid* tile = nullptr;  // the tile (tileX, tileY)
-    std::uint32_t tileX = ~0u, tileY = ~0u;
-    const auto range = [&](int g, std::uint32_t x, std::uint32_t y) {
-        if (g >= tileLevel) return hierarchy.gridNode(g, x, y);
-        const int shift = tileLevel - g;
-        const std::uint32_t tx = x >> shift, ty = y >> shift;
-        if (tx != tileX || ty != tileY) {
-            tile = &hierarchy.tilePyramid(tx, ty);
-            tileX = tx;
-            tileY = ty;
-        }
-        return tile->at(g, x - (tx << shift), y - (ty << shift));
-    };
     const auto zT = static_cast<float>(zThreshold);
     const std::uint64_t all = count == kLanes ? ~std::uint64_t{0} : (std::uint64_t{1} << count) - 1;
     // The children of level g (x0 .. x0 + 1, y0 .. y0 + 1) that the rays of
@@ -193,7 +176,7 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
         for (int c = 0; c < 4; ++c) {
             const std::uint32_t cx = x0 + (c & 1), cy = y0 + (c >> 1);
             inside[c] = (std::uint64_t{cx} << g) < width && (std::uint64_t{cy} << g) < height;
-            if (inside[c]) b.range[c] = g > 0 ? range(g, cx, cy) : pixelDepths(cx, cy);
+            if (inside[c]) b.range[c] = g > 0 ? hierarchy.node(g, cx, cy) : pixelDepths(cx, cy);
         }
         std::uint64_t reached[4] = {0, 0, 0, 0};
         for (int group = 0; group < kLanes; group += kGroup) {

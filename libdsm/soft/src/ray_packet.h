@@ -34,9 +34,6 @@ struct RayInverse {
 /// Clips [ua, ub] to the part of the ray inside the closed box; false if none.
 DSM_TESTED_INTERNAL bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0, double x1,
                                  double y1, double& ua, double& ub);
-inline bool clipRay(const RasterRay& r, double x0, double y0, double x1, double y1, double& ua, double& ub) {
-    return clipRay(r, RayInverse(r), x0, y0, x1, y1, ua, ub);
-}
 
 class DSM_TESTED_INTERNAL RayPacket {
 public:

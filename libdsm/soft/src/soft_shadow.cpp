@@ -299,9 +299,6 @@ struct SoftShadowContext::Impl {
     // kLanes: those that cross more than one pixel go into the packet.
     void tracePacket(std::size_t first, std::size_t count) {
         const MapInfo& m = info();
-        const auto pixel = [](double v, std::uint32_t n) {
-            return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
-        };
         int lanes = 0;
         for (std::size_t k = first; k < first + count; ++k) {
             PacketRay& p = packetRays[k];
@@ -309,9 +306,11 @@ struct SoftShadowContext::Impl {
             if (!p.traced) continue;
             const double ax = p.ray.r0x + p.ua * p.ray.drx, bx = p.ray.r0x + p.ub * p.ray.drx;
             const double ay = p.ray.r0y + p.ua * p.ray.dry, by = p.ray.r0y + p.ub * p.ray.dry;
-            p.x = pixel(std::min(ax, bx), m.width);
-            p.y = pixel(std::min(ay, by), m.height);
-            if (p.x == pixel(std::max(ax, bx), m.width) && p.y == pixel(std::max(ay, by), m.height)) continue;
+            p.x = detail::clampedPixel(std::min(ax, bx), m.width);
+            p.y = detail::clampedPixel(std::min(ay, by), m.height);
+            if (p.x == detail::clampedPixel(std::max(ax, bx), m.width) &&
+                p.y == detail::clampedPixel(std::max(ay, by), m.height))
+                continue;
             p.lane = lanes;
             laneRays[lanes] = p.ray;
             laneUa[lanes] = p.ua;
@@ -465,6 +464,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     s.packetRays.resize(n);
     const RasterAtDepth start(m, zStart), end(m, zEnd);
     const double tStart = (zStart - d) / (p[2] - d), tEnd = (zEnd - d) / (p[2] - d);
+    const double invZStart = 1.0 / zStart, dInvZ = 1.0 / zEnd - invZStart;
     for (std::size_t k = 0; k < n; ++k) {
         Impl::PacketRay& r = s.packetRays[k];
         r.traced = false;
@@ -472,7 +472,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
         const Vec3& q = s.lightSamples[k];
         const double ax = start.x(q[0] + tStart * (p[0] - q[0])), ay = start.y(q[1] + tStart * (p[1] - q[1]));
         const double bx = end.x(q[0] + tEnd * (p[0] - q[0])), by = end.y(q[1] + tEnd * (p[1] - q[1]));
-        r.ray = {ax, ay, bx - ax, by - ay, 1.0 / zStart, 1.0 / zEnd - 1.0 / zStart};
+        r.ray = {ax, ay, bx - ax, by - ay, invZStart, dInvZ};
         r.inverse = detail::RayInverse(r.ray);
         r.ua = 0.0;
         r.ub = 1.0;
