@@ -46,17 +46,14 @@ void concentricDisk(double u, double v, double& x, double& y) {
         return;
     }
     // The angle pi/4 (b/a) from the x axis, or pi/2 - pi/4 (a/b): cos and sin
-    // of the second are sin and cos of pi/4 (a/b).
+    // of the second are sin and cos of pi/4 (a/b). Chosen without a branch:
+    // which one applies is a coin toss from sample to sample.
+    const bool alongX = std::abs(a) > std::abs(b);
+    const double radius = alongX ? a : b, across = alongX ? b : a;
     double sine, cosine;
-    if (std::abs(a) > std::abs(b)) {
-        sinCosQuarter((std::numbers::pi / 4.0) * (b / a), sine, cosine);
-        x = a * cosine;
-        y = a * sine;
-    } else {
-        sinCosQuarter((std::numbers::pi / 4.0) * (a / b), sine, cosine);
-        x = b * sine;
-        y = b * cosine;
-    }
+    sinCosQuarter((std::numbers::pi / 4.0) * (across / radius), sine, cosine);
+    x = radius * (alongX ? cosine : sine);
+    y = radius * (alongX ? sine : cosine);
 }
 
 }  // namespace
@@ -166,14 +163,19 @@ void AreaLight::lightSpaceSamples(const Vec3& receiver, int count, std::uint64_t
     const auto n = static_cast<std::uint32_t>(count);
     const std::uint32_t gy = std::max(1u, static_cast<std::uint32_t>(std::floor(std::sqrt(double(n)))));
     const std::uint32_t gx = (n + gy - 1) / gy;
-    std::vector<std::uint32_t> cells(std::size_t(gx) * gy);
-    for (std::uint32_t k = 0; k < cells.size(); ++k) cells[k] = k;
-    if (cells.size() > n)
+    // A grid with more cells than samples leaves a random choice of cells
+    // empty; a full one (the usual square counts) needs no list of them.
+    std::vector<std::uint32_t> cells;
+    if (std::size_t(gx) * gy > n) {
+        cells.resize(std::size_t(gx) * gy);
+        for (std::uint32_t k = 0; k < cells.size(); ++k) cells[k] = k;
         for (std::uint32_t k = 0; k < n; ++k) std::swap(cells[k], cells[k + rng.next() % (cells.size() - k)]);
+    }
     out.reserve(n);
     for (std::uint32_t k = 0; k < n; ++k) {
-        const double u = (cells[k] % gx + rng.uniform()) / gx;
-        const double v = (cells[k] / gx + rng.uniform()) / gy;
+        const std::uint32_t cell = cells.empty() ? k : cells[k];
+        const double u = (cell % gx + rng.uniform()) / gx;
+        const double v = (cell / gx + rng.uniform()) / gy;
         double x, y;
         if (shape_ == AreaLightShape::Disk) {
             concentricDisk(u, v, x, y);
