@@ -60,27 +60,25 @@ const DepthHierarchy::TilePyramid& DepthHierarchy::tilePyramid(std::uint32_t tx,
 
     const auto tile = ImplAccess::of(map_).getTile(0, tx, ty);
     auto pyramid = std::make_unique<TilePyramid>();
-    // Level 1 straight from the pixels, coarser ones from the level below.
-    std::uint32_t w = tile->width, h = tile->height;
+    // Level 0 from the pixels, each coarser one from the level below.
+    TilePyramid::Level pixels;
+    pixels.width = tile->width;
+    pixels.height = tile->height;
+    pixels.ranges.resize(std::size_t(pixels.width) * pixels.height);
+    for (std::size_t i = 0; i < pixels.ranges.size(); ++i) {
+        const VisibilityView f = tile->pixel(i);
+        if (!f.empty()) pixels.ranges[i] = {f.z(0), f.z(f.size() - 1)};
+    }
+    pyramid->levels.push_back(std::move(pixels));
     for (int g = 1; g < tileLevel_; ++g) {
+        const TilePyramid::Level& fine = pyramid->levels.back();
         TilePyramid::Level level;
-        level.width = (w + 1) / 2;
-        level.height = (h + 1) / 2;
+        level.width = (fine.width + 1) / 2;
+        level.height = (fine.height + 1) / 2;
         level.ranges.resize(std::size_t(level.width) * level.height);
-        for (std::uint32_t y = 0; y < h; ++y)
-            for (std::uint32_t x = 0; x < w; ++x) {
-                DepthRange r;
-                if (g == 1) {
-                    const VisibilityView f = tile->pixel(std::size_t(y) * tile->width + x);
-                    if (!f.empty()) r = {f.z(0), f.z(f.size() - 1)};
-                } else {
-                    const auto& fine = pyramid->levels.back();
-                    r = fine.ranges[std::size_t(y) * fine.width + x];
-                }
-                level.ranges[std::size_t(y / 2) * level.width + x / 2].add(r);
-            }
-        w = level.width;
-        h = level.height;
+        for (std::uint32_t y = 0; y < fine.height; ++y)
+            for (std::uint32_t x = 0; x < fine.width; ++x)
+                level.ranges[std::size_t(y / 2) * level.width + x / 2].add(fine.ranges[std::size_t(y) * fine.width + x]);
         pyramid->levels.push_back(std::move(level));
     }
     const TilePyramid* expected = nullptr;

@@ -6,11 +6,13 @@
 // in it (all layers). Three parts, so opening a map reads no tile:
 //  - g >= tileLevel: a pyramid over the tile grid, built at construction from
 //    the tile directory's minZ/maxZ;
-//  - 1 <= g < tileLevel: a mini-pyramid per tile, built the first time a ray
+//  - 0 <= g < tileLevel: a mini-pyramid per tile, built the first time a ray
 //    or minDepth() descends into the tile and kept (published with an atomic pointer, so
 //    any number of threads may ask at once; two threads may both build one
-//    and one copy is dropped, which costs time, never correctness);
-//  - g = 0: the pixel itself, which the caller reads anyway.
+//    and one copy is dropped, which costs time, never correctness). Level 0
+//    is each pixel's first and last depth: a ray packet's last test reads it
+//    for every pixel it reaches, a plain array read where the pixel's own
+//    arrays would need its tile found and its view built.
 #pragma once
 
 #include <algorithm>
@@ -44,17 +46,17 @@ struct DepthRange {
 
 class DSM_TESTED_INTERNAL DepthHierarchy {
 public:
-    /// Levels 1 .. tileLevel-1 of one tile, finest first, each row-major.
+    /// Levels 0 .. tileLevel-1 of one tile, finest first, each row-major.
     struct TilePyramid {
         struct Level {
             std::uint32_t width = 0, height = 0;
             std::vector<DepthRange> ranges;
         };
-        std::vector<Level> levels;  // levels[g - 1]
-        /// Node (g, x, y) of the tile, 1 <= g < tileLevel, x and y relative
+        std::vector<Level> levels;  // levels[g]
+        /// Node (g, x, y) of the tile, 0 <= g < tileLevel, x and y relative
         /// to the tile's first node of that level.
         DepthRange at(int g, std::uint32_t x, std::uint32_t y) const {
-            const Level& level = levels[static_cast<std::size_t>(g - 1)];
+            const Level& level = levels[static_cast<std::size_t>(g)];
             return level.ranges[std::size_t(y) * level.width + x];
         }
     };
@@ -71,7 +73,8 @@ public:
     std::uint32_t width() const { return width_; }
     std::uint32_t height() const { return height_; }
 
-    /// Range of node (g, x, y), 1 <= g <= topLevel(), the node inside the map.
+    /// Range of node (g, x, y), 0 <= g <= topLevel(), the node inside the map
+    /// (at g = 0, pixel (x, y)'s first and last depth; empty for an empty pixel).
     /// May read and decode a tile (through the map's cache); throws what the
     /// reader throws.
     DepthRange node(int g, std::uint32_t x, std::uint32_t y) const;

@@ -10,19 +10,6 @@
 
 namespace dsm::detail {
 
-bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0, double x1, double y1, double& ua,
-             double& ub) {
-    auto slab = [&](double origin, double direction, double perStep, double lo, double hi) {
-        if (direction == 0.0) return origin >= lo && origin <= hi;
-        double t0 = (lo - origin) * perStep, t1 = (hi - origin) * perStep;
-        if (t0 > t1) std::swap(t0, t1);
-        ua = std::max(ua, t0);
-        ub = std::min(ub, t1);
-        return true;
-    };
-    return slab(r.r0x, r.drx, inverse.x, x0, x1) && slab(r.r0y, r.dry, inverse.y, y0, y1) && ua <= ub;
-}
-
 namespace {
 
 constexpr float kInf = std::numeric_limits<float>::infinity();
@@ -90,7 +77,7 @@ __attribute__((target_clones("avx2", "default"))) void RayPacket::testGroup(cons
     }
 }
 
-void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelDepths, const RasterRay* rays,
+void RayPacket::trace(const DepthHierarchy& hierarchy, const RasterRay* rays,
                       const double* ua, const double* ub, int count, double zThreshold) {
     found_.clear();
     nodeVisits_ = 0;
@@ -176,7 +163,7 @@ void RayPacket::trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelD
         for (int c = 0; c < 4; ++c) {
             const std::uint32_t cx = x0 + (c & 1), cy = y0 + (c >> 1);
             inside[c] = (std::uint64_t{cx} << g) < width && (std::uint64_t{cy} << g) < height;
-            if (inside[c]) b.range[c] = g > 0 ? hierarchy.node(g, cx, cy) : pixelDepths(cx, cy);
+            if (inside[c]) b.range[c] = hierarchy.node(g, cx, cy);
         }
         std::uint64_t reached[4] = {0, 0, 0, 0};
         for (int group = 0; group < kLanes; group += kGroup) {

@@ -7,8 +7,9 @@
 // the rays (a loop the compiler vectorises).
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
-#include <functional>
+#include <utility>
 #include <vector>
 
 #include "depth_hierarchy.h"
@@ -32,8 +33,19 @@ struct RayInverse {
 };
 
 /// Clips [ua, ub] to the part of the ray inside the closed box; false if none.
-DSM_TESTED_INTERNAL bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0, double x1,
-                                 double y1, double& ua, double& ub);
+/// Inline: every ray is clipped to the map, and to each pixel it reads.
+inline bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, double y0, double x1, double y1,
+                    double& ua, double& ub) {
+    auto slab = [&](double origin, double direction, double perStep, double lo, double hi) {
+        if (direction == 0.0) return origin >= lo && origin <= hi;
+        double t0 = (lo - origin) * perStep, t1 = (hi - origin) * perStep;
+        if (t0 > t1) std::swap(t0, t1);
+        ua = std::max(ua, t0);
+        ub = std::min(ub, t1);
+        return true;
+    };
+    return slab(r.r0x, r.drx, inverse.x, x0, x1) && slab(r.r0y, r.dry, inverse.y, y0, y1) && ua <= ub;
+}
 
 class DSM_TESTED_INTERNAL RayPacket {
 public:
@@ -43,20 +55,16 @@ public:
         std::uint32_t x, y;
     };
 
-    /// The depth range of level-0 pixel (x, y): its first and last vertex
-    /// depths, empty for an empty pixel.
-    using PixelDepths = std::function<DepthRange(std::uint32_t x, std::uint32_t y)>;
-
     /// Traces rays[k] over its stretch [ua[k], ub[k]] (inside the map),
     /// k < count <= kLanes, down the hierarchy from the level whose 2 x 2
     /// nodes hold every ray. Finds for each ray the level-0 pixels it may
-    /// cross where the pixel's depths (pixelDepths, asked once a pixel for
-    /// all the rays) may meet the ray's within zThreshold: every pixel whose
-    /// depth range an exact test finds the ray's to meet, and perhaps a few
-    /// more (the tests are in single precision, widened by a few ulps). Their
-    /// order is the packet's, not the ray's. May read and decode tiles
-    /// (through the hierarchy and pixelDepths); throws what they throw.
-    void trace(const DepthHierarchy& hierarchy, const PixelDepths& pixelDepths, const RasterRay* rays, const double* ua,
+    /// cross where the pixel's depths (the hierarchy's level 0, read once a
+    /// pixel for all the rays) may meet the ray's within zThreshold: every
+    /// pixel whose depth range an exact test finds the ray's to meet, and
+    /// perhaps a few more (the tests are in single precision, widened by a
+    /// few ulps). Their order is the packet's, not the ray's. May read and
+    /// decode tiles (through the hierarchy); throws what it throws.
+    void trace(const DepthHierarchy& hierarchy, const RasterRay* rays, const double* ua,
                const double* ub, int count, double zThreshold);
 
     /// The pixels found for ray k by the last trace().
