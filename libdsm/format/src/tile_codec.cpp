@@ -186,19 +186,6 @@ DecodedTile::DecodedTile(std::uint32_t w, std::uint32_t h, std::uint64_t vertice
     layerStarts_ = reinterpret_cast<std::uint32_t*>(at);
 }
 
-VisibilityView DecodedTile::pixel(std::size_t p) const {
-    if (!records_) return {};
-    const PixelRecord& a = records_[p];
-    const PixelRecord& b = records_[p + 1];
-    const std::size_t vertices = b.vertexStart - a.vertexStart;
-    std::span<const std::uint32_t> pixelCounts;
-    if (counts_) pixelCounts = std::span<const std::uint32_t>(counts_ + a.vertexStart, vertices);
-    return VisibilityView(std::span<const float>(z_ + a.vertexStart, vertices),
-                          std::span<const float>(v_ + a.valueStart, b.valueStart - a.valueStart), pixelCounts,
-                          static_cast<int>(a.channels),
-                          std::span<const std::uint32_t>(layerStarts_ + a.layerStart, b.layerStart - a.layerStart));
-}
-
 // `raw` as one zstd frame at `level`; empty when zstd fails.
 std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int level) {
     std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));

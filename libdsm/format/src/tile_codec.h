@@ -52,7 +52,19 @@ public:
     std::uint32_t* counts() { return counts_; }
     std::uint32_t* layerStarts() { return layerStarts_; }
 
-    VisibilityView pixel(std::size_t index) const;
+    /// Pixel `index` (row-major). Inline: a soft-shadow ray reads one per pixel it crosses.
+    VisibilityView pixel(std::size_t index) const {
+        if (!records_) return {};
+        const PixelRecord& a = records_[index];
+        const PixelRecord& b = records_[index + 1];
+        const std::size_t vertices = b.vertexStart - a.vertexStart;
+        std::span<const std::uint32_t> pixelCounts;
+        if (counts_) pixelCounts = std::span<const std::uint32_t>(counts_ + a.vertexStart, vertices);
+        return VisibilityView(std::span<const float>(z_ + a.vertexStart, vertices),
+                              std::span<const float>(v_ + a.valueStart, b.valueStart - a.valueStart), pixelCounts,
+                              static_cast<int>(a.channels),
+                              std::span<const std::uint32_t>(layerStarts_ + a.layerStart, b.layerStart - a.layerStart));
+    }
     std::size_t memoryBytes() const { return sizeof(DecodedTile) + storageBytes_; }
 
 private:

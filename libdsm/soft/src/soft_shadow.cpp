@@ -67,6 +67,12 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double l
     // Most segments a ray's depth range reaches end before it or begin
     // beyond it: ruled out before any division (depth(1) >= z0).
     if (!after(z1) || z0 > hi) return 0;
+    // A segment inside the range: every sample, with no division (depth(k)
+    // lies in [z0, z1] for every k, so the search below finds them all too).
+    if (z1 <= hi && after(z0)) {
+        deepest = z1;
+        return count;
+    }
     const double h = (z1 - z0) / static_cast<double>(count);
     auto depth = [&](std::uint64_t k) { return k >= count ? z1 : z0 + static_cast<double>(k) * h; };
     if (depth(1) > hi) return 0;
@@ -118,14 +124,20 @@ struct SoftShadowContext::Impl {
     };
     CachedTile microcache[kMicrocacheTiles];
     int nextVictim = 0;
+    // The tile read last (held in the microcache): a ray's next pixel is
+    // mostly in it.
+    std::uint32_t lastIndex = ~0u;
+    const format::DecodedTile* lastTile = nullptr;
 
     // The ray being traced.
     RasterRay ray;
     double vis[3] = {1.0, 1.0, 1.0};
+    double mostVisible = 1.0;  // the largest of vis, kept as it changes
     double consumed = -std::numeric_limits<double>::infinity();
     double zThreshold = 0.0;
     double bias = 0.0;  // of the current query
     double stopBelow = 0.0;
+    double stopAtOrBelow = 0.0;  // 0 with the umbra early-out, else -infinity
     std::size_t layers = 1;
     bool umbraEarlyOut = true;
     SampleAttenuation attenuation = SampleAttenuation::Subtractive;
@@ -136,22 +148,30 @@ struct SoftShadowContext::Impl {
         const std::uint32_t T = info().tileSize;
         const std::uint32_t tx = x / T, ty = y / T;
         const std::uint32_t index = ty * info().levels[0].tilesX + tx;
-        const format::DecodedTile* tile = nullptr;
-        for (const CachedTile& c : microcache)
-            if (c.index == index && c.tile) tile = c.tile.get();
-        if (!tile) {
-            CachedTile& slot = microcache[nextVictim];
-            nextVictim = (nextVictim + 1) % kMicrocacheTiles;
-            slot.index = index;
-            slot.tile = shared->reader->getTile(0, tx, ty);
-            tile = slot.tile.get();
+        if (index != lastIndex) {
+            const format::DecodedTile* tile = nullptr;
+            for (const CachedTile& c : microcache)
+                if (c.index == index && c.tile) tile = c.tile.get();
+            if (!tile) {
+                CachedTile& slot = microcache[nextVictim];
+                nextVictim = (nextVictim + 1) % kMicrocacheTiles;
+                slot.tile = shared->reader->getTile(0, tx, ty);  // before the index: getTile() may throw
+                slot.index = index;
+                tile = slot.tile.get();
+            }
+            lastIndex = index;
+            lastTile = tile;
         }
-        return tile->pixel(std::size_t(y % T) * tile->width + x % T);
+        return lastTile->pixel(std::size_t(y % T) * lastTile->width + x % T);
+    }
+
+    void startRay() {
+        vis[0] = vis[1] = vis[2] = mostVisible = 1.0;
+        consumed = -std::numeric_limits<double>::infinity();
     }
 
     bool stopped() const {
-        const double most = std::max({vis[0], vis[1], vis[2]});
-        return most < stopBelow || (umbraEarlyOut && most <= 0.0);  // nothing left to lose
+        return mostVisible < stopBelow || mostVisible <= stopAtOrBelow;  // nothing left to lose
     }
 
     // Xie §5.2 at one pixel: the ray's depth range across it, [z(ua), z(ub)],
@@ -176,7 +196,7 @@ struct SoftShadowContext::Impl {
                 opaqueAt(f, end - 1)) {
                 // Every sample of a layer that ends opaque: whatever the
                 // attenuation rule, the drops add up to all the light.
-                vis[0] = vis[1] = vis[2] = 0.0;
+                vis[0] = vis[1] = vis[2] = mostVisible = 0.0;
                 ++stats.raysProvenOpaque;
                 for (std::size_t i = begin; i < end; ++i) stats.samplesHit += counted ? f.count(i) : 1;
                 return;
@@ -217,25 +237,32 @@ struct SoftShadowContext::Impl {
         return true;
     }
 
-    // A monochrome pixel's one value applies to each of the ray's channels:
-    // the ray may already carry colour from RGB pixels it crossed before.
+    // The drop of each stored channel is worked out once; a monochrome
+    // pixel's one drop applies to each of the ray's channels, since the ray
+    // may already carry colour from RGB pixels it crossed before.
     void attenuate(const VisibilityView& f, std::size_t i, std::size_t layerBegin, std::uint64_t hits,
                    std::uint64_t count) {
         const double share = hits == count ? 1.0 : static_cast<double>(hits) / static_cast<double>(count);
-        const bool mono = f.channels() == 1;
-        for (int c = 0; c < 3; ++c) {
-            const int stored = mono ? 0 : c;
-            const double before = i == layerBegin ? 1.0 : f.value(i - 1, stored);
-            const double after = f.value(i, stored);
-            auto& v = vis[c];
-            if (attenuation == SampleAttenuation::Multiplicative) {
-                if (before <= 0.0) continue;  // nothing left to learn in this layer
-                const double ratio = std::clamp(after / before, 0.0, 1.0);
-                v *= hits == count ? ratio : std::pow(ratio, share);
+        const bool multiplicative = attenuation == SampleAttenuation::Multiplicative;
+        const int stored = f.channels();
+        double drop[kMaxChannels] = {0.0, 0.0, 0.0};  // subtracted from, or (multiplicative) a factor of, the visibility
+        for (int c = 0; c < stored; ++c) {
+            const double before = i == layerBegin ? 1.0 : f.value(i - 1, c);
+            const double after = f.value(i, c);
+            if (!multiplicative) {
+                drop[c] = (before - after) * share;
+            } else if (before <= 0.0) {
+                drop[c] = 1.0;  // nothing left to learn in this layer
             } else {
-                v = std::max(0.0, v - (before - after) * share);
+                const double ratio = std::clamp(after / before, 0.0, 1.0);
+                drop[c] = hits == count ? ratio : std::pow(ratio, share);
             }
         }
+        for (int c = 0; c < 3; ++c) {
+            const double d = drop[stored == 1 ? 0 : c];
+            vis[c] = multiplicative ? vis[c] * d : std::max(0.0, vis[c] - d);
+        }
+        mostVisible = std::max({vis[0], vis[1], vis[2]});
     }
 
     // Every pixel the ray crosses, in order (Amanatides & Woo).
@@ -284,11 +311,6 @@ struct SoftShadowContext::Impl {
     RasterRay laneRays[RayPacket::kLanes];
     double laneUa[RayPacket::kLanes], laneUb[RayPacket::kLanes];
     RayPacket packet;
-    // A pixel's depth range, for the packet's last test: read once for all its rays.
-    const RayPacket::PixelDepths pixelDepths = [this](std::uint32_t x, std::uint32_t y) {
-        const VisibilityView f = pixel(x, y);
-        return f.empty() ? DepthRange{} : DepthRange{f.z(0), f.z(f.size() - 1)};
-    };
     struct Crossed {
         double a, b;
         std::uint32_t x, y;
@@ -317,7 +339,7 @@ struct SoftShadowContext::Impl {
             laneUb[lanes] = p.ub;
             ++lanes;
         }
-        packet.trace(*shared->hierarchy, pixelDepths, laneRays, laneUa, laneUb, lanes, zThreshold);
+        packet.trace(*shared->hierarchy, laneRays, laneUa, laneUb, lanes, zThreshold);
         stats.nodesVisited += packet.nodeVisits();
     }
 
@@ -442,6 +464,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     s.stopBelow = options.visibilityThreshold;
     s.attenuation = options.attenuation;
     s.umbraEarlyOut = options.umbraEarlyOut;
+    s.stopAtOrBelow = options.umbraEarlyOut ? 0.0 : -std::numeric_limits<double>::infinity();
     s.layers = static_cast<std::size_t>(std::min(options.layers.value_or(m.maxLayers), m.maxLayers));
     const double d = s.shared->light.planeDepth();
     const double zEnd = p[2] - s.bias;
@@ -484,8 +507,7 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
         if (options.hierarchy) s.tracePacket(first, count);
         for (std::size_t k = first; k < first + count; ++k) {
             const Impl::PacketRay& r = s.packetRays[k];
-            s.vis[0] = s.vis[1] = s.vis[2] = 1.0;
-            s.consumed = -std::numeric_limits<double>::infinity();
+            s.startRay();
             ++result.rays;
             if (r.traced) {
                 s.ray = r.ray;
