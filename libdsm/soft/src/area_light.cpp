@@ -37,6 +37,13 @@ void sinCosQuarter(double t, double& sine, double& cosine) {
     cosine = c;
 }
 
+// `first` ? a : b by masks: the compiler turns the conditional into a branch,
+// which mispredicts half the time when the choice is a coin toss.
+double chooseWithoutBranch(bool first, double a, double b) {
+    const std::uint64_t mask = std::uint64_t{0} - static_cast<std::uint64_t>(first);
+    return std::bit_cast<double>((std::bit_cast<std::uint64_t>(a) & mask) | (std::bit_cast<std::uint64_t>(b) & ~mask));
+}
+
 // Shirley & Chiu's concentric map from [0,1)^2 to the unit disk: keeps
 // neighbouring strata neighbours, unlike the polar map.
 void concentricDisk(double u, double v, double& x, double& y) {
@@ -46,14 +53,14 @@ void concentricDisk(double u, double v, double& x, double& y) {
         return;
     }
     // The angle pi/4 (b/a) from the x axis, or pi/2 - pi/4 (a/b): cos and sin
-    // of the second are sin and cos of pi/4 (a/b). Chosen without a branch:
-    // which one applies is a coin toss from sample to sample.
+    // of the second are sin and cos of pi/4 (a/b). Which one applies is a
+    // coin toss from sample to sample.
     const bool alongX = std::abs(a) > std::abs(b);
-    const double radius = alongX ? a : b, across = alongX ? b : a;
+    const double radius = chooseWithoutBranch(alongX, a, b), across = chooseWithoutBranch(alongX, b, a);
     double sine, cosine;
     sinCosQuarter((std::numbers::pi / 4.0) * (across / radius), sine, cosine);
-    x = radius * (alongX ? cosine : sine);
-    y = radius * (alongX ? sine : cosine);
+    x = radius * chooseWithoutBranch(alongX, cosine, sine);
+    y = radius * chooseWithoutBranch(alongX, sine, cosine);
 }
 
 }  // namespace
@@ -172,10 +179,18 @@ void AreaLight::lightSpaceSamples(const Vec3& receiver, int count, std::uint64_t
         for (std::uint32_t k = 0; k < n; ++k) std::swap(cells[k], cells[k + rng.next() % (cells.size() - k)]);
     }
     out.reserve(n);
+    std::uint32_t column = 0, row = 0;  // of cell k in a full grid, counted rather than divided out
     for (std::uint32_t k = 0; k < n; ++k) {
-        const std::uint32_t cell = cells.empty() ? k : cells[k];
-        const double u = (cell % gx + rng.uniform()) / gx;
-        const double v = (cell / gx + rng.uniform()) / gy;
+        std::uint32_t cx = column, cy = row;
+        if (!cells.empty()) {
+            cx = cells[k] % gx;
+            cy = cells[k] / gx;
+        } else if (++column == gx) {
+            column = 0;
+            ++row;
+        }
+        const double u = (cx + rng.uniform()) / gx;
+        const double v = (cy + rng.uniform()) / gy;
         double x, y;
         if (shape_ == AreaLightShape::Disk) {
             concentricDisk(u, v, x, y);
