@@ -29,9 +29,11 @@
 namespace dsm::detail {
 
 /// The pixel holding raster coordinate v along an axis of n pixels, clamped
-/// to the axis.
+/// to the axis (pixel 0 for NaN). Truncation is the floor for 0 < v < n, and
+/// much cheaper where the processor has no rounding instruction (SSE2).
 inline std::uint32_t clampedPixel(double v, std::uint32_t n) {
-    return std::min(static_cast<std::uint32_t>(std::max(0.0, std::floor(v))), n - 1);
+    if (!(v > 0.0)) return 0;
+    return v < static_cast<double>(n) ? static_cast<std::uint32_t>(v) : n - 1;
 }
 
 struct DepthRange {

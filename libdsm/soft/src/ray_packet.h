@@ -9,7 +9,6 @@
 
 #include <algorithm>
 #include <cstdint>
-#include <utility>
 #include <vector>
 
 #include "depth_hierarchy.h"
@@ -38,10 +37,9 @@ inline bool clipRay(const RasterRay& r, const RayInverse& inverse, double x0, do
                     double& ua, double& ub) {
     auto slab = [&](double origin, double direction, double perStep, double lo, double hi) {
         if (direction == 0.0) return origin >= lo && origin <= hi;
-        double t0 = (lo - origin) * perStep, t1 = (hi - origin) * perStep;
-        if (t0 > t1) std::swap(t0, t1);
-        ua = std::max(ua, t0);
-        ub = std::min(ub, t1);
+        const double t0 = (lo - origin) * perStep, t1 = (hi - origin) * perStep;
+        ua = std::max(ua, std::min(t0, t1));  // no branch on the direction's sign
+        ub = std::min(ub, std::max(t0, t1));
         return true;
     };
     return slab(r.r0x, r.drx, inverse.x, x0, x1) && slab(r.r0y, r.dry, inverse.y, y0, y1) && ua <= ub;

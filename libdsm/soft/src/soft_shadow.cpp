@@ -52,41 +52,37 @@ namespace {
 constexpr int kMicrocacheTiles = 8;
 
 // Estimated samples k = 1..count of the segment (z0, z1] at depths
-// z0 + k (z1 - z0) / count that lie in [lo, hi] and beyond `consumed`.
-// Returns how many, and the deepest in `deepest`.
-std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double lo, double hi, double consumed,
-                             double& deepest) {
-    const bool strict = consumed >= lo;
-    const double from = strict ? consumed : lo;
-    auto after = [&](double d) { return strict ? d > from : d >= from; };
-    if (z1 <= z0) {  // a step: every sample at z1
-        if (z1 > hi || !after(z1)) return 0;
+// z0 + k (z1 - z0) / count that lie beyond `beyond` and at or before `hi`.
+// Returns how many, and the deepest in `deepest`. A ray reading a pixel
+// passes beyond = the larger of the depth its earlier pixels' samples reached
+// and the double below its depth range's start (so that the start itself
+// counts): one comparison per test, the same for every sample.
+std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double beyond, double hi, double& deepest) {
+    // Every sample, with no division: a step (all of them at z1) or a
+    // segment inside the range (depth(1) >= z0 and depth(count) = z1, so the
+    // search below would find them all too).
+    if (z1 <= hi && std::min(z0, z1) > beyond) {
         deepest = z1;
         return count;
     }
-    // Most segments a ray's depth range reaches end before it or begin
-    // beyond it: ruled out before any division (depth(1) >= z0).
-    if (!after(z1) || z0 > hi) return 0;
-    // A segment inside the range: every sample, with no division (depth(k)
-    // lies in [z0, z1] for every k, so the search below finds them all too).
-    if (z1 <= hi && after(z0)) {
-        deepest = z1;
-        return count;
-    }
+    // None: a step not taken whole, or a segment ending before the range or
+    // beginning beyond it (the most common case).
+    if (z1 <= z0 || !(z1 > beyond) || z0 > hi) return 0;
     const double h = (z1 - z0) / static_cast<double>(count);
     auto depth = [&](std::uint64_t k) { return k >= count ? z1 : z0 + static_cast<double>(k) * h; };
     if (depth(1) > hi) return 0;
     // First guesses (samples per unit of depth, a division beside h's rather
-    // than after it), then fixed up against the depths themselves (rounding
-    // may put them one off).
+    // than after it; the ceiling and floor by truncation, cheap without a
+    // rounding instruction), then fixed up against the depths themselves
+    // (rounding may put them one off).
     const double c = static_cast<double>(count), perDepth = c / (z1 - z0);
-    auto first = static_cast<std::uint64_t>(std::clamp(std::ceil((from - z0) * perDepth), 1.0, c));
-    while (first > 1 && after(depth(first - 1))) --first;
-    while (first < count && !after(depth(first))) ++first;
-    auto last = static_cast<std::uint64_t>(std::clamp(std::floor((hi - z0) * perDepth), 1.0, c));
+    auto first = static_cast<std::uint64_t>(std::clamp((beyond - z0) * perDepth, 0.0, c - 1.0)) + 1;
+    while (first > 1 && depth(first - 1) > beyond) --first;
+    while (first < count && !(depth(first) > beyond)) ++first;
+    auto last = static_cast<std::uint64_t>(std::clamp((hi - z0) * perDepth, 1.0, c));
     while (last < count && depth(last + 1) <= hi) ++last;
     while (last > 1 && depth(last) > hi) --last;
-    if (last < first || depth(last) > hi || !after(depth(first))) return 0;
+    if (last < first || depth(last) > hi || !(depth(first) > beyond)) return 0;
     deepest = depth(last);
     return last - first + 1;
 }
@@ -184,6 +180,7 @@ struct SoftShadowContext::Impl {
         if (za > zb) std::swap(za, zb);
         const double lo = za - zThreshold, hi = zb + zThreshold;
         if (f.z(0) > hi || f.z(f.size() - 1) < lo) return;
+        const double beyond = std::max(consumed, std::nextafter(lo, -std::numeric_limits<double>::infinity()));
         const std::size_t layerCount = std::min(layers, f.layerCount());
         const auto depths = f.depths();
         const bool counted = f.hasCounts();
@@ -192,7 +189,7 @@ struct SoftShadowContext::Impl {
             const std::size_t begin = f.layerBegin(layer), end = f.layerEnd(layer);
             if (begin == end || f.z(end - 1) < lo) continue;
             if (f.z(begin) > hi) break;  // layers lie in depth order
-            if (umbraEarlyOut && f.z(begin) >= lo && f.z(begin) > consumed && f.z(end - 1) <= hi &&
+            if (umbraEarlyOut && f.z(begin) > beyond && f.z(end - 1) <= hi &&
                 opaqueAt(f, end - 1)) {
                 // Every sample of a layer that ends opaque: whatever the
                 // attenuation rule, the drops add up to all the light.
@@ -220,7 +217,7 @@ struct SoftShadowContext::Impl {
                     count = 1;
                 }
                 double deepest = 0.0;
-                const std::uint64_t hits = samplesInRange(zPrev, f.z(i), count, lo, hi, consumed, deepest);
+                const std::uint64_t hits = samplesInRange(zPrev, f.z(i), count, beyond, hi, deepest);
                 if (hits == 0) continue;
                 attenuate(f, i, begin, hits, count);
                 stats.samplesHit += hits;
