@@ -8,6 +8,7 @@
 
 #include "depth_hierarchy.h"
 #include "ray_packet.h"
+#include "sorted_depths.h"
 #include "dsm/auto_bias.h"
 #include "dsm/error.h"
 #include "reader_impl.h"
@@ -18,6 +19,7 @@ DSM_NAMESPACE_BEGIN
 using detail::concat;
 using detail::clipRay;
 using detail::DepthRange;
+using detail::firstAtOrBeyond;
 using detail::RasterRay;
 using detail::RayPacket;
 
@@ -85,24 +87,6 @@ std::uint64_t samplesInRange(double z0, double z1, std::uint64_t count, double b
     if (last < first || depth(last) > hi || !(depth(first) > beyond)) return 0;
     deepest = depth(last);
     return last - first + 1;
-}
-
-// The first of the sorted depths z[begin, end) at or beyond lo. Most layers
-// are short: there, the count of depths before lo, a loop without branches
-// that the compiler vectorises (a binary search mispredicts about half its
-// steps); a binary search for long ones.
-std::size_t firstAtOrBeyond(const float* z, std::size_t begin, std::size_t end, double lo) {
-    constexpr std::size_t kCounted = 32;
-    if (end - begin > kCounted || !(std::abs(lo) <= std::numeric_limits<float>::max()))
-        return static_cast<std::size_t>(
-            std::lower_bound(z + begin, z + end, lo, [](float zk, double q) { return zk < q; }) - z);
-    // A float is below lo exactly when it is below the least float >= lo:
-    // the count then compares floats, four or eight to an instruction.
-    float least = static_cast<float>(lo);
-    if (static_cast<double>(least) < lo) least = std::nextafter(least, std::numeric_limits<float>::infinity());
-    std::uint32_t before = 0;
-    for (std::size_t k = begin; k < end; ++k) before += z[k] < least ? 1u : 0u;
-    return begin + before;
 }
 
 // Raster positions of light-space points at one depth, as
