@@ -68,6 +68,8 @@ public:
     /// The pixels found for ray k by the last trace().
     const Pixel* pixelsBegin(int k) const { return pixels_.data() + first_[static_cast<std::size_t>(k)]; }
     const Pixel* pixelsEnd(int k) const { return pixels_.data() + first_[static_cast<std::size_t>(k) + 1]; }
+    /// Every ray's pixels from the last trace() (a pixel once for each ray).
+    const std::vector<Pixel>& allPixels() const { return pixels_; }
     /// Nodes above level 0 that rays entered (a node once for each ray).
     std::uint64_t nodeVisits() const { return nodeVisits_; }
 

@@ -336,6 +336,15 @@ struct SoftShadowContext::Impl {
         }
         packet.trace(*shared->hierarchy, laneRays, laneUa, laneUb, lanes, zThreshold);
         stats.nodesVisited += packet.nodeVisits();
+        // Every pixel found, its arrays asked for now: the rays read them one
+        // after another, and each pixel's depths, counts and values lie in
+        // separate arrays of its tile, mostly outside the first-level cache.
+        for (const RayPacket::Pixel& q : packet.allPixels()) {
+            const VisibilityView f = pixel(q.x, q.y);
+            __builtin_prefetch(f.depths().data());
+            __builtin_prefetch(f.allValues().data());
+            __builtin_prefetch(f.counts().data());
+        }
     }
 
     // Ray p (already set as `ray`) through the pixels the packet found for it.
