@@ -314,7 +314,7 @@ Json firstQuery(const std::filesystem::path& path, const std::vector<Vec3>& poin
 /// classification off, so every ray is traced) and through the real scene
 /// (the Embree reference's transmittance), for the same receivers, light
 /// samples and light (medium), both including the drawing of the light
-/// samples; measured one after the other in one run.
+/// samples; measured in one run, alternating slice by slice of the receivers.
 Json raySpeed(const std::shared_ptr<const dsm::DeepShadowMap>& map, const Receivers& receivers,
               const dsm::ReferenceTracer& reference, double radius, double planeDepth,
               const dsm::SoftShadowOptions& base, const std::string& name) {
@@ -329,20 +329,28 @@ Json raySpeed(const std::shared_ptr<const dsm::DeepShadowMap>& map, const Receiv
     dsm::SoftShadowContext context(tracer);
     for (const Vec3& p : points) context.visibility(p, o);  // warm: tiles decoded, pyramids built
     context.resetStats();
-    auto start = std::chrono::steady_clock::now();
-    for (const Vec3& p : points) context.visibility(p, o);
-    const double mapSeconds = seconds(start);
+    // The receivers in slices, each traced through the map and then through
+    // the scene, so that both see the machine as it is at that moment (on a
+    // shared machine the speed moves between one phase and the next).
+    constexpr std::size_t kSlices = 16;
+    double mapSeconds = 0.0, sceneSeconds = 0.0, sceneRays = 0.0, sink = 0.0;
+    for (std::size_t slice = 0; slice < kSlices; ++slice) {
+        const std::size_t begin = points.size() * slice / kSlices, end = points.size() * (slice + 1) / kSlices;
+        auto start = std::chrono::steady_clock::now();
+        for (std::size_t i = begin; i < end; ++i) context.visibility(points[i], o);
+        mapSeconds += seconds(start);
+        start = std::chrono::steady_clock::now();
+        for (std::size_t i = begin; i < end; ++i) {
+            const Vec3& p = points[i];
+            const std::vector<Vec3> samples = light.samples(p, o.samples, o.seed);
+            for (std::size_t k = 0; k < samples.size(); ++k)
+                sink += reference.transmittance(p, samples[k], (k + 0.5) / samples.size())[0];
+            sceneRays += double(samples.size());
+        }
+        sceneSeconds += seconds(start);
+    }
     const double mapRays = double(context.stats().rays);
     const double opaque = double(context.stats().raysProvenOpaque);
-    start = std::chrono::steady_clock::now();
-    double sceneRays = 0.0, sink = 0.0;
-    for (const Vec3& p : points) {
-        const std::vector<Vec3> samples = light.samples(p, o.samples, o.seed);
-        for (std::size_t k = 0; k < samples.size(); ++k)
-            sink += reference.transmittance(p, samples[k], (k + 0.5) / samples.size())[0];
-        sceneRays += double(samples.size());
-    }
-    const double sceneSeconds = seconds(start);
     const double mapRate = mapRays / std::max(1e-9, mapSeconds), sceneRate = sceneRays / std::max(1e-9, sceneSeconds);
     std::printf("  %s rays, one core, classification off: map %.3g/s, scene (Embree) %.3g/s: map / scene %.2f "
                 "(%.0f rays each; %.1f %% of map rays proven opaque; checksum %.3g)\n",
