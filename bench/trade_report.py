@@ -278,7 +278,8 @@ class Report:
                 r = sc["ray_speed"]
                 self.add(f"A ray through the map against a ray through the scene (one thread, medium light, 64 rays "
                          f"for each of {r['receivers']} receivers, classification off so every ray is traced; the "
-                         "same light samples; measured one after the other): map "
+                         "same light samples; the receivers in slices, each traced through the map and then through the "
+                         "scene): map "
                          f"{r['map_rays_per_second'] / 1e6:.2f} M rays/s ({r['nodes_per_ray']:.1f} nodes and "
                          f"{r['pixels_per_ray']:.1f} pixels per ray, "
                          f"{100 * r['rays_proven_opaque'] / max(1, r['rays']):.1f} % of the rays proven opaque), "
