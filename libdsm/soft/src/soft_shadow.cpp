@@ -135,7 +135,6 @@ struct SoftShadowContext::Impl {
     double zThreshold = 0.0;
     double bias = 0.0;  // of the current query
     double stopBelow = 0.0;
-    double stopAtOrBelow = 0.0;  // 0 with the umbra early-out, else -infinity
     std::size_t layers = 1;
     bool umbraEarlyOut = true;
     SampleAttenuation attenuation = SampleAttenuation::Subtractive;
@@ -169,7 +168,7 @@ struct SoftShadowContext::Impl {
     }
 
     bool stopped() const {
-        return mostVisible < stopBelow || mostVisible <= stopAtOrBelow;  // nothing left to lose
+        return mostVisible < stopBelow || (umbraEarlyOut && mostVisible <= 0.0);  // nothing left to lose
     }
 
     // Xie §5.2 at one pixel: the ray's depth range across it, [z(ua), z(ub)],
@@ -264,8 +263,7 @@ struct SoftShadowContext::Impl {
     void walkPixels(double ua, double ub) {
         const auto W = static_cast<long>(info().width), H = static_cast<long>(info().height);
         const double sx = ray.r0x + ua * ray.drx, sy = ray.r0y + ua * ray.dry;
-        long x = std::clamp(static_cast<long>(std::floor(sx)), 0L, W - 1);
-        long y = std::clamp(static_cast<long>(std::floor(sy)), 0L, H - 1);
+        long x = detail::clampedPixel(sx, info().width), y = detail::clampedPixel(sy, info().height);
         const double inf = std::numeric_limits<double>::infinity();
         const long stepX = ray.drx > 0.0 ? 1 : -1, stepY = ray.dry > 0.0 ? 1 : -1;
         double nextX = ray.drx == 0.0 ? inf : (static_cast<double>(ray.drx > 0.0 ? x + 1 : x) - ray.r0x) / ray.drx;
@@ -468,7 +466,6 @@ SoftShadowResult SoftShadowContext::visibility(const Vec3& receiverWorld, const 
     s.stopBelow = options.visibilityThreshold;
     s.attenuation = options.attenuation;
     s.umbraEarlyOut = options.umbraEarlyOut;
-    s.stopAtOrBelow = options.umbraEarlyOut ? 0.0 : -std::numeric_limits<double>::infinity();
     s.layers = static_cast<std::size_t>(std::min(options.layers.value_or(m.maxLayers), m.maxLayers));
     const double d = s.shared->light.planeDepth();
     const double zEnd = p[2] - s.bias;
