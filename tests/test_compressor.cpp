@@ -432,6 +432,39 @@ TEST(Compressor, DoubleInputBoundIncludesFloatRounding) {
     }
 }
 
+TEST(Compressor, ExtremeDepthDifferencesKeepTheBound) {
+    // Segments shorter than 2^-100 or longer than 2^100 divide as doubles
+    // instead of refining a float quotient; runs that mix them with ordinary
+    // ones keep the bound, and a run gives what push() per vertex gives.
+    std::mt19937_64 rng(57);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    for (int regime = 0; regime < 4; ++regime) {
+        for (double eps : {0.01, 0.05}) {
+            VisibilityFunction f(1, true);
+            double z = regime == 0 ? 1e-44 : regime == 1 ? 1e-30 : regime == 2 ? 1e30 : 1e36;
+            float v = 1.0f;
+            for (int i = 0; i < 400; ++i) {
+                z *= regime == 3 ? 1.02 : 1.3;  // up to about 3e39 on the last: stops at float's largest
+                const float depth = static_cast<float>(std::min(z, 3.0e38));
+                if (!f.empty() && depth <= f.z(f.size() - 1)) continue;
+                v = std::max(0.0f, v - static_cast<float>(0.004 * unit(rng)));
+                f.append(depth, &v, static_cast<std::uint32_t>(i));
+            }
+            CompressorOptions options;
+            options.tolerance = eps;
+            options.keepCounts = true;
+            Compressor c(options);
+            for (std::size_t i = 0; i < f.size(); ++i) ASSERT_TRUE(c.push(f.z(i), f.values(i), f.count(i)));
+            const VisibilityFunction expected = c.finish();
+            expectValidOutput(f, expected);
+            EXPECT_LE(maxError(f, expected), eps + kSlack) << "regime " << regime << ", eps " << eps;
+            EXPECT_LT(expected.size(), f.size() / 2) << "regime " << regime << ", eps " << eps;
+            ASSERT_EQ(c.pushValid(f.depths().data(), f.allValues().data(), f.counts().data(), f.size()), f.size());
+            EXPECT_EQ(c.finish(), expected) << "regime " << regime << ", eps " << eps;
+        }
+    }
+}
+
 // --- Multilayer (MTSM) mode ---------------------------------------------
 
 CompressorOptions layered(int maxLayers, double eps, int channels = 1) {

@@ -7,6 +7,7 @@
 #include <vector>
 
 #include "simd_lanes.h"
+#include "slope_blocks.h"
 #include "dsm/error.h"
 #include "text.h"
 
@@ -164,6 +165,8 @@ public:
     // by selects for RGB (six bounds make too many branches to predict).
     template <int C, bool withCounts, bool Centred, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+        if constexpr (C == 1 && !Centred)
+            if (band > 0.0) return extendRunBySlopes<withCounts>(z, v, counts, n, band);
         SlopeWindow w[C];
         Double2 origin[C];
         forEachChannel<C>([&](int c) {
@@ -251,6 +254,43 @@ public:
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
+    }
+
+    // extendRun() for one channel, not centred, with a band > 0 (a band of 0
+    // needs the exact cross products: its window is a single slope). The
+    // window is held as two slopes, and each vertex's bounds are slopes too
+    // (slope_blocks.h). The window after a vertex is the least top and the
+    // greatest bottom so far, and min and max are exact, so a block of
+    // vertices taken at once leaves the window that taking them one by one
+    // would; and a window feasible at a block's last vertex was feasible at
+    // each before it (feasibleWindow()). So whole blocks are taken with no
+    // branch a vertex to mispredict (takeSlopeBlocks()), and only the block
+    // where the segment ends, and the run's last vertices, one by one.
+    template <bool withCounts, typename T>
+    std::size_t extendRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                                  double band) {
+        const detail::SlopeFrame frame = detail::slopeFrame(originZ_, originV_[0], band);
+        double hi = window_[0].hi(), lo = window_[0].lo();
+        std::uint64_t count = 0;
+        std::size_t taken = 0;
+        // Depths never fall along a run, so its first and last bound them all.
+        const bool fastDepths = n >= 8 && static_cast<double>(z[0]) - frame.originZ >= detail::kLeastFastDepth &&
+                                static_cast<double>(z[n - 1]) - frame.originZ <= detail::kMostFastDepth;
+        if (fastDepths) taken = detail::takeSlopeBlocks(z, v, withCounts ? counts : nullptr, n, frame, lo, hi, count);
+        for (; taken < n; ++taken) {
+            const detail::VertexSlopes s = detail::vertexSlopes(z[taken], v[taken], frame);
+            const double nextHi = std::min(hi, s.top), nextLo = std::max(lo, s.bottom);
+            if (!detail::feasibleWindow(nextLo, nextHi, frame.originV, s.dz)) break;
+            hi = nextHi;
+            lo = nextLo;
+            if constexpr (withCounts) count += counts[taken];
+        }
+        window_[0].num = Double2{hi, -lo};
+        window_[0].den = Double2{1.0, 1.0};
+        window_[0].limitEnd(frame.originV);
+        segmentCount_ += count;
+        if (taken > 0) lastZ_ = z[taken - 1];
+        return taken;
     }
 
     // Ends the current layer: closes the open segment and makes sure the layer

@@ -1,0 +1,42 @@
+#include "slope_blocks.h"
+
+#include "slope_blocks_body.h"
+
+namespace dsm::detail {
+
+#ifdef DSM_SLOPE_BLOCKS_AVX2
+SlopeBlockVariants avx2SlopeBlocksCompiled();  // slope_blocks_avx2.cpp
+#endif
+
+SlopeBlockVariants baselineSlopeBlocks() { return {&slopeBlocks<float>, &slopeBlocks<double>}; }
+
+SlopeBlockVariants avx2SlopeBlocks() {
+#ifdef DSM_SLOPE_BLOCKS_AVX2
+    if (__builtin_cpu_supports("avx2")) return avx2SlopeBlocksCompiled();
+#endif
+    return {nullptr, nullptr};
+}
+
+namespace {
+
+const SlopeBlockVariants& chosenSlopeBlocks() {
+    static const SlopeBlockVariants chosen = [] {
+        const SlopeBlockVariants avx2 = avx2SlopeBlocks();
+        return avx2.floats ? avx2 : baselineSlopeBlocks();
+    }();
+    return chosen;
+}
+
+}  // namespace
+
+std::size_t takeSlopeBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,
+                            const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
+    return chosenSlopeBlocks().floats(z, v, counts, n, frame, lo, hi, count);
+}
+
+std::size_t takeSlopeBlocks(const float* z, const double* v, const std::uint32_t* counts, std::size_t n,
+                            const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
+    return chosenSlopeBlocks().doubles(z, v, counts, n, frame, lo, hi, count);
+}
+
+}  // namespace dsm::detail

@@ -1,0 +1,101 @@
+// The slope bounds input vertices put on a greedy segment of one channel, and
+// whole blocks of eight vertices taken at a time (internal). The compressor
+// (compressor.cpp) holds a segment's window as two slopes [lo, hi] of lines
+// from its origin; each input vertex bounds them by its target window
+// (value +- band) less the origin value, over its depth beyond the origin.
+//
+// Every vertex's bounds come from the same arithmetic, whether computed alone
+// (vertexSlopes()) or in a block, with or without AVX2: IEEE operations in
+// the same order and no fused multiply-add, so a map is the same on every
+// machine and whatever the blocks' alignment.
+//
+// The helpers below are static: the AVX2 translation unit includes them, and
+// a copy it compiled must not stand in for the baseline's elsewhere.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "tested_internal.h"
+
+namespace dsm::detail {
+
+// Depth differences in this range take the quotient of floats of
+// vertexSlopes(); others (segments shorter than 2^-100 or longer than 2^100)
+// are divided as doubles.
+inline constexpr double kLeastFastDepth = 0x1p-100;
+inline constexpr double kMostFastDepth = 0x1p100;
+
+// What the bounds of a segment's vertices are measured from.
+struct SlopeFrame {
+    double originZ;       // the origin's depth
+    double originV;       // the origin's value
+    double topOffset;     // band - originV
+    double bottomOffset;  // -band - originV
+};
+
+static inline SlopeFrame slopeFrame(double originZ, double originV, double band) {
+    return {originZ, originV, band - originV, -band - originV};
+}
+
+// Whether a segment from an origin at V = originV to dz beyond it has a
+// feasible slope in [lo, hi]: max(lo, -originV / dz) <= min(hi, 0). Along a
+// segment it holds up to some vertex and never again: lo only rises, hi only
+// falls, and hi * dz only falls once hi < 0.
+static inline bool feasibleWindow(double lo, double hi, double originV, double dz) {
+    return (lo <= hi) & (lo <= 0.0) & (hi * dz >= -originV);
+}
+
+// 1 / dz for a depth difference in [kLeastFastDepth, kMostFastDepth]: a
+// quotient of floats refined by one Newton step in double, to a relative
+// error of about 2^-45. A division of doubles costs more, and takes two lanes
+// where the floats' takes four (eight with AVX). The error moves a line's
+// value by about 1e-14, far inside the 2^-25 that the compressor's band
+// leaves below its tolerance.
+static inline double fastInverse(double dz) {
+    const double q = static_cast<double>(1.0f / static_cast<float>(dz));
+    return q * (2.0 - dz * q);
+}
+
+struct VertexSlopes {
+    double top, bottom, dz;
+};
+
+template <typename T>
+static inline VertexSlopes vertexSlopes(float z, T v, const SlopeFrame& f) {
+    const double dz = static_cast<double>(z) - f.originZ;
+    const double inverse = (dz >= kLeastFastDepth && dz <= kMostFastDepth) ? fastInverse(dz) : 1.0 / dz;
+    const double value = static_cast<double>(v);
+    return {(value + f.topOffset) * inverse, (value + f.bottomOffset) * inverse, dz};
+}
+
+// Takes the leading whole blocks of eight vertices of a run that keep the
+// window [lo, hi] feasible at their last vertex (so at every vertex: see
+// feasibleWindow()), narrowing the window by each and adding their counts
+// (when counts is not null) to count. Returns how many vertices it took, a
+// multiple of eight; the block where the segment ends and the run's last
+// vertices are left to vertexSlopes(). Preconditions: depths never fall along
+// the run, and every depth difference from the origin is in
+// [kLeastFastDepth, kMostFastDepth]. Runs on AVX2 where the processor has it.
+DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const float* v, const std::uint32_t* counts,
+                                                std::size_t n, const SlopeFrame& frame, double& lo, double& hi,
+                                                std::uint64_t& count);
+DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const double* v, const std::uint32_t* counts,
+                                                std::size_t n, const SlopeFrame& frame, double& lo, double& hi,
+                                                std::uint64_t& count);
+
+// takeSlopeBlocks() on the baseline instruction set, and on AVX2 (null where
+// the library was built without it, or the processor lacks it): for the
+// tests, which check that the two agree bit for bit.
+using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
+                                            const SlopeFrame&, double&, double&, std::uint64_t&);
+using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
+                                             const SlopeFrame&, double&, double&, std::uint64_t&);
+struct SlopeBlockVariants {
+    SlopeBlocksOfFloats floats;
+    SlopeBlocksOfDoubles doubles;
+};
+DSM_TESTED_INTERNAL SlopeBlockVariants baselineSlopeBlocks();
+DSM_TESTED_INTERNAL SlopeBlockVariants avx2SlopeBlocks();
+
+}  // namespace dsm::detail

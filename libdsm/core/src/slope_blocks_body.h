@@ -1,0 +1,161 @@
+// The body of takeSlopeBlocks() (slope_blocks.h), included by the baseline
+// and the AVX2 translation units; each gets its own copy, with internal
+// linkage, compiled for its instruction set.
+#pragma once
+
+#include <cstring>
+
+#include "slope_blocks.h"
+
+#ifdef __AVX__
+#include <immintrin.h>
+#endif
+
+namespace dsm::detail {
+namespace {
+
+using Double4 = double __attribute__((vector_size(32)));
+using Float4 = float __attribute__((vector_size(16)));
+using Count4 = std::uint32_t __attribute__((vector_size(16)));
+using Sum4 = std::uint64_t __attribute__((vector_size(32)));
+
+// Conversions between four floats and four doubles. The compiler's generic
+// conversion splits them in halves even where one AVX instruction does it.
+// Results go through references: a function returning a 32-byte vector has
+// another ABI with AVX than without.
+inline void widen(const Float4& f, Double4& out) {
+#ifdef __AVX__
+    out = reinterpret_cast<Double4>(_mm256_cvtps_pd(reinterpret_cast<__m128>(f)));
+#else
+    out = __builtin_convertvector(f, Double4);
+#endif
+}
+
+inline void narrow(const Double4& d, Float4& out) {
+#ifdef __AVX__
+    out = reinterpret_cast<Float4>(_mm256_cvtpd_ps(reinterpret_cast<__m256d>(d)));
+#else
+    out = __builtin_convertvector(d, Float4);
+#endif
+}
+
+inline void loadValues(const float* v, Double4& out) {
+    Float4 f;
+    std::memcpy(&f, v, sizeof f);
+    widen(f, out);
+}
+
+inline void loadValues(const double* v, Double4& out) { std::memcpy(&out, v, sizeof out); }
+
+// Own minimum and maximum rather than std::min and std::max: an out-of-line
+// copy of those that the AVX2 unit compiled could be linked in everywhere.
+inline double lesser(double a, double b) { return b < a ? b : a; }
+inline double greater(double a, double b) { return b > a ? b : a; }
+
+// Eight vertices' least top slope and greatest bottom slope, four lanes each,
+// and the last vertex's depth beyond the origin.
+struct EightSlopes {
+    Double4 least, greatest;
+    double lastDz;
+};
+
+template <typename T>
+[[gnu::always_inline]] inline void eightSlopes(const float* z, const T* v, double originZ, double topOffset,
+                                               double bottomOffset, EightSlopes& out) {
+    Double4 top[2], bottom[2], dz;
+    for (int h = 0; h < 2; ++h) {
+        Float4 depth;
+        std::memcpy(&depth, z + 4 * h, sizeof depth);
+        widen(depth, dz);
+        dz -= originZ;
+        // fastInverse(), four lanes at once: the same operations.
+        Float4 dzFloat;
+        narrow(dz, dzFloat);
+        Double4 q;
+        widen(1.0f / dzFloat, q);
+        const Double4 inverse = q * (2.0 - dz * q);
+        Double4 value;
+        loadValues(v + 4 * h, value);
+        top[h] = (value + topOffset) * inverse;
+        bottom[h] = (value + bottomOffset) * inverse;
+    }
+    out.least = top[1] < top[0] ? top[1] : top[0];
+    out.greatest = bottom[1] > bottom[0] ? bottom[1] : bottom[0];
+    out.lastDz = dz[3];
+}
+
+// Whether the window of four lanes each way (its bounds the least hi and the
+// greatest lo) is feasible at lastDz.
+[[gnu::always_inline]] inline bool feasibleLanes(const Double4& hi, const Double4& lo, double originV,
+                                                 double lastDz) {
+    const double leastHi = lesser(lesser(hi[0], hi[1]), lesser(hi[2], hi[3]));
+    const double greatestLo = greater(greater(lo[0], lo[1]), greater(lo[2], lo[3]));
+    return feasibleWindow(greatestLo, leastHi, originV, lastDz);
+}
+
+template <bool withCounts>
+[[gnu::always_inline]] inline void addCounts(const std::uint32_t* counts, Sum4& sum) {
+    if constexpr (withCounts) {
+        Count4 c[2];
+        std::memcpy(c, counts, sizeof c);
+        sum += __builtin_convertvector(c[0], Sum4) + __builtin_convertvector(c[1], Sum4);
+    }
+}
+
+// The window is kept as four lanes each way, its bounds the least and the
+// greatest lane, so that a block narrows it by one vector operation. Blocks
+// go in pairs, tested once at the second's end; a pair that fails is tested
+// at its first block's end, so that at most one block is left to be walked
+// vertex by vertex.
+template <bool withCounts, typename T>
+std::size_t slopeBlocksOf(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                          const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
+    // Locals, not the references and the frame: stores through those could
+    // alias the input as far as the compiler knows.
+    const double originZ = f.originZ, originV = f.originV, topOffset = f.topOffset,
+                 bottomOffset = f.bottomOffset;
+    Double4 windowLo = {lo, lo, lo, lo}, windowHi = {hi, hi, hi, hi};
+    std::size_t i = 0;
+    Sum4 sum = {};
+    for (; i + 8 <= n;) {
+        EightSlopes first;
+        eightSlopes(z + i, v + i, originZ, topOffset, bottomOffset, first);
+        const Double4 firstHi = first.least < windowHi ? first.least : windowHi;
+        const Double4 firstLo = first.greatest > windowLo ? first.greatest : windowLo;
+        if (i + 16 <= n) {
+            EightSlopes second;
+            eightSlopes(z + i + 8, v + i + 8, originZ, topOffset, bottomOffset, second);
+            const Double4 secondHi = second.least < firstHi ? second.least : firstHi;
+            const Double4 secondLo = second.greatest > firstLo ? second.greatest : firstLo;
+            if (feasibleLanes(secondHi, secondLo, originV, second.lastDz)) {
+                windowHi = secondHi;
+                windowLo = secondLo;
+                addCounts<withCounts>(counts + i, sum);
+                addCounts<withCounts>(counts + i + 8, sum);
+                i += 16;
+                continue;
+            }
+        }
+        if (feasibleLanes(firstHi, firstLo, originV, first.lastDz)) {
+            windowHi = firstHi;
+            windowLo = firstLo;
+            addCounts<withCounts>(counts + i, sum);
+            i += 8;
+        }
+        break;
+    }
+    hi = lesser(lesser(windowHi[0], windowHi[1]), lesser(windowHi[2], windowHi[3]));
+    lo = greater(greater(windowLo[0], windowLo[1]), greater(windowLo[2], windowLo[3]));
+    count += sum[0] + sum[1] + sum[2] + sum[3];
+    return i;
+}
+
+template <typename T>
+std::size_t slopeBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                        const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
+    return counts ? slopeBlocksOf<true>(z, v, counts, n, f, lo, hi, count)
+                  : slopeBlocksOf<false>(z, v, counts, n, f, lo, hi, count);
+}
+
+}  // namespace
+}  // namespace dsm::detail

@@ -1,0 +1,132 @@
+// The compressor's blocks of slopes (slope_blocks.h, internal): whole blocks
+// of eight vertices leave exactly the window, count and number of vertices
+// that taking the vertices one by one with vertexSlopes() gives up to the
+// last whole block before the segment ends, bit for bit, on the baseline
+// instruction set and on AVX2 (where the processor has it).
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <random>
+#include <vector>
+
+#include "slope_blocks.h"
+
+namespace {
+
+using namespace dsm::detail;
+
+struct Walk {
+    std::size_t taken;
+    double lo, hi;
+    std::uint64_t count;
+};
+
+// Vertex by vertex: the window after each vertex, and where it stops being
+// feasible; then cut back to the last whole block of eight.
+template <typename T>
+Walk walkInBlocks(const std::vector<float>& z, const std::vector<T>& v, const std::vector<std::uint32_t>& counts,
+                  const SlopeFrame& frame, double lo, double hi) {
+    std::vector<Walk> after{{0, lo, hi, 0}};
+    for (std::size_t i = 0; i < z.size(); ++i) {
+        const VertexSlopes s = vertexSlopes(z[i], v[i], frame);
+        const double nextHi = std::min(hi, s.top), nextLo = std::max(lo, s.bottom);
+        if (!feasibleWindow(nextLo, nextHi, frame.originV, s.dz)) break;
+        hi = nextHi;
+        lo = nextLo;
+        after.push_back({i + 1, lo, hi, after.back().count + counts[i]});
+    }
+    return after[(after.size() - 1) / 8 * 8];
+}
+
+template <typename T>
+void checkVariant(std::size_t (*blocks)(const float*, const T*, const std::uint32_t*, std::size_t,
+                                        const SlopeFrame&, double&, double&, std::uint64_t&),
+                  const char* name) {
+    std::mt19937_64 rng(29);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int ended = 0, whole = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const std::size_t n = rng() % 90;
+        const double originZ = 0.5 + 4.0 * unit(rng);
+        const double originV = trial % 5 == 0 ? 1.0 : unit(rng);
+        const double band = trial % 7 == 0 ? 1e-9 : 0.2 * unit(rng) + 1e-6;
+        const SlopeFrame frame = slopeFrame(originZ, originV, band);
+        // A falling input, in steps (equal depths) and ramps, sometimes
+        // flat for long stretches so that segments run past many blocks.
+        std::vector<float> z(n);
+        std::vector<T> v(n);
+        std::vector<std::uint32_t> counts(n);
+        double depth = originZ + 1e-3 * unit(rng), value = originV;
+        const double fall = trial % 3 == 0 ? 0.002 : 0.05;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (rng() % 3 != 0) depth += 0.05 * unit(rng);
+            value = std::max(0.0, value - fall * unit(rng));
+            z[i] = static_cast<float>(depth);
+            v[i] = static_cast<T>(value);
+            counts[i] = static_cast<std::uint32_t>(rng() % 5 == 0 ? 0xffffffffu : rng() % 1000);
+        }
+        // The open segment's window, as after its first vertex.
+        const VertexSlopes first = vertexSlopes(static_cast<float>(originZ + 1e-3), originV, frame);
+        const double lo0 = first.bottom, hi0 = first.top;
+        for (bool withCounts : {false, true}) {
+            const Walk expected = walkInBlocks(z, v, counts, frame, lo0, hi0);
+            double lo = lo0, hi = hi0;
+            std::uint64_t count = 5;
+            const std::size_t taken =
+                blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, lo, hi, count);
+            ASSERT_EQ(taken, expected.taken) << name << " trial " << trial;
+            ASSERT_EQ(lo, expected.lo) << name << " trial " << trial;
+            ASSERT_EQ(hi, expected.hi) << name << " trial " << trial;
+            ASSERT_EQ(count, 5 + (withCounts ? expected.count : 0)) << name << " trial " << trial;
+            if (withCounts) (taken + 8 <= n ? ended : whole) += 1;
+        }
+    }
+    // Both outcomes were seen many times: segments that end within the run,
+    // and runs taken to their last whole block.
+    EXPECT_GT(ended, 300) << name;
+    EXPECT_GT(whole, 300) << name;
+}
+
+TEST(SlopeBlocks, BaselineBlocksTakeWhatVertexByVertexWould) {
+    const SlopeBlockVariants baseline = baselineSlopeBlocks();
+    checkVariant(baseline.floats, "baseline, float values");
+    checkVariant(baseline.doubles, "baseline, double values");
+}
+
+TEST(SlopeBlocks, Avx2BlocksTakeWhatVertexByVertexWould) {
+    const SlopeBlockVariants avx2 = avx2SlopeBlocks();
+    if (!avx2.floats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
+    checkVariant(avx2.floats, "AVX2, float values");
+    checkVariant(avx2.doubles, "AVX2, double values");
+}
+
+TEST(SlopeBlocks, FastInverseIsCloseToTheQuotient) {
+    // The Newton step brings the float quotient to about 2^-45 of 1 / dz
+    // across the fast range (the compressor's bound leaves 2^-25).
+    std::mt19937_64 rng(3);
+    std::uniform_real_distribution<double> exponent(-100.0, 100.0), unit(1.0, 2.0);
+    double worst = 0.0;
+    for (int i = 0; i < 200000; ++i) {
+        const double dz = std::ldexp(unit(rng), static_cast<int>(exponent(rng)));
+        if (dz < kLeastFastDepth || dz > kMostFastDepth) continue;
+        worst = std::max(worst, std::abs(fastInverse(dz) * dz - 1.0));
+    }
+    EXPECT_LT(worst, 0x1p-43);
+    EXPECT_GT(worst, 0.0);
+}
+
+TEST(SlopeBlocks, DepthDifferencesOutsideTheFastRangeAreDivided) {
+    // Where the float quotient would overflow or lose its precision, the
+    // slopes are the quotients of doubles.
+    const SlopeFrame frame = slopeFrame(0.0, 1.0, 0.25);
+    for (const double dz : {1.4e-45, 1e-44, 3e-39, 0x1p-101, 1.0, 0x1p101, 1e38, 3.4e38}) {
+        const VertexSlopes s = vertexSlopes(static_cast<float>(dz), 0.5, frame);
+        EXPECT_EQ(s.dz, static_cast<double>(static_cast<float>(dz)));
+        EXPECT_NEAR(s.top / ((0.5 + 0.25 - 1.0) / s.dz), 1.0, 1e-12) << "dz " << dz;
+        EXPECT_NEAR(s.bottom / ((0.5 - 0.25 - 1.0) / s.dz), 1.0, 1e-12) << "dz " << dz;
+    }
+}
+
+}  // namespace
