@@ -274,8 +274,8 @@ public:
         std::uint64_t count = 0;
         std::size_t taken = 0;
         // Depths never fall along a run, so its first and last bound them all.
-        const bool fastDepths = n >= 8 && static_cast<double>(z[0]) - frame.originZ >= detail::kLeastFastDepth &&
-                                static_cast<double>(z[n - 1]) - frame.originZ <= detail::kMostFastDepth;
+        const bool fastDepths = n >= 8 && static_cast<double>(z[0]) - originZ_ >= detail::kLeastFastDepth &&
+                                static_cast<double>(z[n - 1]) - originZ_ <= detail::kMostFastDepth;
         if (fastDepths) taken = detail::takeSlopeBlocks(z, v, withCounts ? counts : nullptr, n, frame, lo, hi, count);
         for (; taken < n; ++taken) {
             const detail::VertexSlopes s = detail::vertexSlopes(z[taken], v[taken], frame);

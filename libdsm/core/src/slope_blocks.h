@@ -28,13 +28,13 @@ inline constexpr double kMostFastDepth = 0x1p100;
 
 // What the bounds of a segment's vertices are measured from.
 struct SlopeFrame {
-    double originZ;       // the origin's depth
+    float originZ;        // the origin's depth
     double originV;       // the origin's value
     double topOffset;     // band - originV
     double bottomOffset;  // -band - originV
 };
 
-static inline SlopeFrame slopeFrame(double originZ, double originV, double band) {
+static inline SlopeFrame slopeFrame(float originZ, double originV, double band) {
     return {originZ, originV, band - originV, -band - originV};
 }
 
@@ -46,14 +46,14 @@ static inline bool feasibleWindow(double lo, double hi, double originV, double d
     return (lo <= hi) & (lo <= 0.0) & (hi * dz >= -originV);
 }
 
-// 1 / dz for a depth difference in [kLeastFastDepth, kMostFastDepth]: a
-// quotient of floats refined by one Newton step in double, to a relative
-// error of about 2^-45. A division of doubles costs more, and takes two lanes
-// where the floats' takes four (eight with AVX). The error moves a line's
-// value by about 1e-14, far inside the 2^-25 that the compressor's band
-// leaves below its tolerance.
-static inline double fastInverse(double dz) {
-    const double q = static_cast<double>(1.0f / static_cast<float>(dz));
+// 1 / dz for a depth difference dz = z - originZ in [kLeastFastDepth,
+// kMostFastDepth]: the quotient of floats 1 / (z - originZ), refined by one
+// Newton step in double, to a relative error of about 2^-45. A division of
+// doubles costs more, and takes two lanes where the floats' takes four. The
+// error moves a line's value by about 1e-14, far inside the 2^-25 that the
+// compressor's band leaves below its tolerance.
+static inline double fastInverse(float z, float originZ, double dz) {
+    const double q = static_cast<double>(1.0f / (z - originZ));
     return q * (2.0 - dz * q);
 }
 
@@ -63,8 +63,8 @@ struct VertexSlopes {
 
 template <typename T>
 static inline VertexSlopes vertexSlopes(float z, T v, const SlopeFrame& f) {
-    const double dz = static_cast<double>(z) - f.originZ;
-    const double inverse = (dz >= kLeastFastDepth && dz <= kMostFastDepth) ? fastInverse(dz) : 1.0 / dz;
+    const double dz = static_cast<double>(z) - static_cast<double>(f.originZ);
+    const double inverse = (dz >= kLeastFastDepth && dz <= kMostFastDepth) ? fastInverse(z, f.originZ, dz) : 1.0 / dz;
     const double value = static_cast<double>(v);
     return {(value + f.topOffset) * inverse, (value + f.bottomOffset) * inverse, dz};
 }

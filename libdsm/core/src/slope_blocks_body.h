@@ -60,19 +60,17 @@ struct EightSlopes {
 };
 
 template <typename T>
-[[gnu::always_inline]] inline void eightSlopes(const float* z, const T* v, double originZ, double topOffset,
+[[gnu::always_inline]] inline void eightSlopes(const float* z, const T* v, float originZ, double topOffset,
                                                double bottomOffset, EightSlopes& out) {
     Double4 top[2], bottom[2], dz;
     for (int h = 0; h < 2; ++h) {
         Float4 depth;
         std::memcpy(&depth, z + 4 * h, sizeof depth);
         widen(depth, dz);
-        dz -= originZ;
+        dz -= static_cast<double>(originZ);
         // fastInverse(), four lanes at once: the same operations.
-        Float4 dzFloat;
-        narrow(dz, dzFloat);
         Double4 q;
-        widen(1.0f / dzFloat, q);
+        widen(1.0f / (depth - originZ), q);
         const Double4 inverse = q * (2.0 - dz * q);
         Double4 value;
         loadValues(v + 4 * h, value);
@@ -102,48 +100,58 @@ template <bool withCounts>
     }
 }
 
+// `blocks` blocks of eight vertices, taken when the window (hi, lo) narrowed
+// by all of them is feasible at their last vertex; otherwise the window is
+// left as it was. Returns whether it took them.
+template <int blocks, bool withCounts, typename T>
+[[gnu::always_inline]] inline bool takeBlocks(const float* z, const T* v, const std::uint32_t* counts,
+                                              float originZ, double originV, double topOffset,
+                                              double bottomOffset, Double4& hi, Double4& lo, Sum4& sum) {
+    Double4 nextHi = hi, nextLo = lo;
+    double lastDz = 0.0;
+    for (int b = 0; b < blocks; ++b) {
+        EightSlopes slopes;
+        eightSlopes(z + 8 * b, v + 8 * b, originZ, topOffset, bottomOffset, slopes);
+        nextHi = slopes.least < nextHi ? slopes.least : nextHi;
+        nextLo = slopes.greatest > nextLo ? slopes.greatest : nextLo;
+        lastDz = slopes.lastDz;
+    }
+    if (!feasibleLanes(nextHi, nextLo, originV, lastDz)) return false;
+    hi = nextHi;
+    lo = nextLo;
+    if constexpr (withCounts)
+        for (int b = 0; b < blocks; ++b) {
+            Count4 c[2];
+            std::memcpy(c, counts + 8 * b, sizeof c);
+            sum += __builtin_convertvector(c[0], Sum4) + __builtin_convertvector(c[1], Sum4);
+        }
+    return true;
+}
+
 // The window is kept as four lanes each way, its bounds the least and the
 // greatest lane, so that a block narrows it by one vector operation. Blocks
-// go in pairs, tested once at the second's end; a pair that fails is tested
-// at its first block's end, so that at most one block is left to be walked
-// vertex by vertex.
+// go four at a time, so that the test of the window (which reduces the lanes)
+// is made once for 32 vertices; where the segment ends within four blocks,
+// they are taken again one at a time (their slopes computed again), so that
+// at most one block is left to be walked vertex by vertex.
 template <bool withCounts, typename T>
 std::size_t slopeBlocksOf(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
                           const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
     // Locals, not the references and the frame: stores through those could
     // alias the input as far as the compiler knows.
-    const double originZ = f.originZ, originV = f.originV, topOffset = f.topOffset,
+    const float originZ = f.originZ;
+    const double originV = f.originV, topOffset = f.topOffset,
                  bottomOffset = f.bottomOffset;
     Double4 windowLo = {lo, lo, lo, lo}, windowHi = {hi, hi, hi, hi};
     std::size_t i = 0;
     Sum4 sum = {};
-    for (; i + 8 <= n;) {
-        EightSlopes first;
-        eightSlopes(z + i, v + i, originZ, topOffset, bottomOffset, first);
-        const Double4 firstHi = first.least < windowHi ? first.least : windowHi;
-        const Double4 firstLo = first.greatest > windowLo ? first.greatest : windowLo;
-        if (i + 16 <= n) {
-            EightSlopes second;
-            eightSlopes(z + i + 8, v + i + 8, originZ, topOffset, bottomOffset, second);
-            const Double4 secondHi = second.least < firstHi ? second.least : firstHi;
-            const Double4 secondLo = second.greatest > firstLo ? second.greatest : firstLo;
-            if (feasibleLanes(secondHi, secondLo, originV, second.lastDz)) {
-                windowHi = secondHi;
-                windowLo = secondLo;
-                addCounts<withCounts>(counts + i, sum);
-                addCounts<withCounts>(counts + i + 8, sum);
-                i += 16;
-                continue;
-            }
-        }
-        if (feasibleLanes(firstHi, firstLo, originV, first.lastDz)) {
-            windowHi = firstHi;
-            windowLo = firstLo;
-            addCounts<withCounts>(counts + i, sum);
-            i += 8;
-        }
-        break;
-    }
+    const auto countsAt = [&](std::size_t at) { return withCounts ? counts + at : counts; };
+    while (i + 32 <= n && takeBlocks<4, withCounts>(z + i, v + i, countsAt(i), originZ, originV, topOffset,
+                                                    bottomOffset, windowHi, windowLo, sum))
+        i += 32;
+    while (i + 8 <= n && takeBlocks<1, withCounts>(z + i, v + i, countsAt(i), originZ, originV, topOffset,
+                                                   bottomOffset, windowHi, windowLo, sum))
+        i += 8;
     hi = lesser(lesser(windowHi[0], windowHi[1]), lesser(windowHi[2], windowHi[3]));
     lo = greater(greater(windowLo[0], windowLo[1]), greater(windowLo[2], windowLo[3]));
     count += sum[0] + sum[1] + sum[2] + sum[3];
