@@ -6,8 +6,9 @@
 //
 // Every vertex's bounds come from the same arithmetic, whether computed alone
 // (vertexSlopes()) or in a block, with or without AVX2: IEEE operations in
-// the same order and no fused multiply-add, so a map is the same on every
-// machine and whatever the blocks' alignment.
+// the same order and no fused multiply-add (the files that compute them are
+// built with -ffp-contract=off), so a map is the same on every machine and
+// whatever the blocks' alignment.
 //
 // The helpers below are static: the AVX2 translation unit includes them, and
 // a copy it compiled must not stand in for the baseline's elsewhere.
