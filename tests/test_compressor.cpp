@@ -353,6 +353,55 @@ TEST(Compressor, PushValidRunsAgreeWithPushPerVertex) {
     }
 }
 
+TEST(Compressor, GreyRgbRunsAgreeWithPushPerVertex) {
+    // RGB whose channels stay within the tolerance of each other (the grey
+    // path: their mid-range, its band narrowed by their spread), then turn
+    // coloured part way (the builder widens to RGB): a run gives what push()
+    // vertex by vertex gives, whole or split, float or double values.
+    std::mt19937_64 rng(58);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int widened = 0, stayedGrey = 0;
+    for (int trial = 0; trial < 60; ++trial) {
+        const double eps = trial % 3 == 0 ? 0.01 : 0.05;
+        VisibilityFunction f(3, true);
+        float z = 1.0f, v = 1.0f;
+        const std::size_t n = 50 + rng() % 700;
+        const std::size_t colourAt = trial % 2 == 0 ? n : rng() % n;  // where the channels part, if anywhere
+        for (std::size_t i = 0; i < n; ++i) {
+            if (rng() % 3 != 0) z += static_cast<float>(0.05 * unit(rng));
+            v = std::max(0.0f, v - static_cast<float>(0.01 * unit(rng)));
+            const float spread = static_cast<float>((i >= colourAt ? 3.0 : 0.9) * eps * unit(rng));
+            const float rgb[3] = {v, std::max(0.0f, v - spread), std::max(0.0f, v - 0.5f * spread)};
+            // Keep every channel non-increasing: no channel above its previous value.
+            float values[3];
+            for (int c = 0; c < 3; ++c) values[c] = f.empty() ? rgb[c] : std::min(rgb[c], f.value(f.size() - 1, c));
+            f.append(z, values, static_cast<std::uint32_t>(rng() % 4));
+        }
+        CompressorOptions options;
+        options.tolerance = eps;
+        options.channels = 3;
+        options.keepCounts = true;
+        Compressor c(options);
+        for (std::size_t i = 0; i < f.size(); ++i) ASSERT_TRUE(c.push(f.z(i), f.values(i), f.count(i)));
+        const VisibilityFunction expected = c.finish();
+        EXPECT_LE(maxErrorAllChannels(f, expected), eps + kSlack) << "trial " << trial;
+        (expected.channels() == 3 ? widened : stayedGrey) += 1;
+
+        ASSERT_EQ(c.pushValid(f.depths().data(), f.allValues().data(), f.counts().data(), f.size()), f.size());
+        EXPECT_EQ(c.finish(), expected) << "trial " << trial;
+
+        const std::vector<double> values(f.allValues().begin(), f.allValues().end());
+        const std::size_t split = rng() % f.size();
+        ASSERT_EQ(c.pushValid(f.depths().data(), values.data(), f.counts().data(), split), split);
+        ASSERT_EQ(c.pushValid(f.depths().data() + split, values.data() + 3 * split, f.counts().data() + split,
+                              f.size() - split),
+                  f.size() - split);
+        EXPECT_EQ(c.finish(), expected) << "trial " << trial << ", split " << split;
+    }
+    EXPECT_GT(widened, 10);
+    EXPECT_GT(stayedGrey, 10);
+}
+
 TEST(Compressor, PushValidRunStopsWhereALayerEnds) {
     CompressorOptions options;
     options.tolerance = 0.05;

@@ -2,7 +2,8 @@
 // of eight vertices leave exactly the window, count and number of vertices
 // that taking the vertices one by one with vertexSlopes() gives up to the
 // last whole block before the segment ends, bit for bit, on the baseline
-// instruction set and on AVX2 (where the processor has it).
+// instruction set and on AVX2 (where the processor has it), with one band
+// for the run and with a band for each vertex.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -26,11 +27,11 @@ struct Walk {
 // Vertex by vertex: the window after each vertex, and where it stops being
 // feasible; then cut back to the last whole block of eight.
 template <typename T>
-Walk walkInBlocks(const std::vector<float>& z, const std::vector<T>& v, const std::vector<std::uint32_t>& counts,
-                  const SlopeFrame& frame, double lo, double hi) {
+Walk walkInBlocks(const std::vector<float>& z, const std::vector<T>& v, const std::vector<double>* bands,
+                  const std::vector<std::uint32_t>& counts, const SlopeFrame& frame, double lo, double hi) {
     std::vector<Walk> after{{0, lo, hi, 0}};
     for (std::size_t i = 0; i < z.size(); ++i) {
-        const VertexSlopes s = vertexSlopes(z[i], v[i], frame);
+        const VertexSlopes s = vertexSlopes(z[i], v[i], bands ? withBand(frame, (*bands)[i]) : frame);
         const double nextHi = std::min(hi, s.top), nextLo = std::max(lo, s.bottom);
         if (!feasibleWindow(nextLo, nextHi, frame.originV, s.dz)) break;
         hi = nextHi;
@@ -41,7 +42,7 @@ Walk walkInBlocks(const std::vector<float>& z, const std::vector<T>& v, const st
 }
 
 template <typename T>
-void checkVariant(std::size_t (*blocks)(const float*, const T*, const std::uint32_t*, std::size_t,
+void checkVariant(std::size_t (*blocks)(const float*, const T*, const double*, const std::uint32_t*, std::size_t,
                                         const SlopeFrame&, double&, double&, std::uint64_t&),
                   const char* name) {
     std::mt19937_64 rng(29);
@@ -58,6 +59,7 @@ void checkVariant(std::size_t (*blocks)(const float*, const T*, const std::uint3
         std::vector<float> z(n);
         std::vector<T> v(n);
         std::vector<std::uint32_t> counts(n);
+        std::vector<double> bands(n);  // each vertex's own (grey RGB input)
         double depth = originZ + 1e-3 * unit(rng), value = originV;
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
@@ -66,22 +68,24 @@ void checkVariant(std::size_t (*blocks)(const float*, const T*, const std::uint3
             z[i] = static_cast<float>(depth);
             v[i] = static_cast<T>(value);
             counts[i] = static_cast<std::uint32_t>(rng() % 5 == 0 ? 0xffffffffu : rng() % 1000);
+            bands[i] = band * (0.5 + 0.5 * unit(rng));
         }
         // The open segment's window, as after its first vertex.
         const VertexSlopes first = vertexSlopes(static_cast<float>(originZ + 1e-3), originV, frame);
         const double lo0 = first.bottom, hi0 = first.top;
-        for (bool withCounts : {false, true}) {
-            const Walk expected = walkInBlocks(z, v, counts, frame, lo0, hi0);
-            double lo = lo0, hi = hi0;
-            std::uint64_t count = 5;
-            const std::size_t taken =
-                blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, lo, hi, count);
-            ASSERT_EQ(taken, expected.taken) << name << " trial " << trial;
-            ASSERT_EQ(lo, expected.lo) << name << " trial " << trial;
-            ASSERT_EQ(hi, expected.hi) << name << " trial " << trial;
-            ASSERT_EQ(count, 5 + (withCounts ? expected.count : 0)) << name << " trial " << trial;
-            if (withCounts) (taken + 8 <= n ? ended : whole) += 1;
-        }
+        for (bool withCounts : {false, true})
+            for (bool ownBands : {false, true}) {
+                const Walk expected = walkInBlocks(z, v, ownBands ? &bands : nullptr, counts, frame, lo0, hi0);
+                double lo = lo0, hi = hi0;
+                std::uint64_t count = 5;
+                const std::size_t taken = blocks(z.data(), v.data(), ownBands ? bands.data() : nullptr,
+                                                 withCounts ? counts.data() : nullptr, n, frame, lo, hi, count);
+                ASSERT_EQ(taken, expected.taken) << name << " trial " << trial;
+                ASSERT_EQ(lo, expected.lo) << name << " trial " << trial;
+                ASSERT_EQ(hi, expected.hi) << name << " trial " << trial;
+                ASSERT_EQ(count, 5 + (withCounts ? expected.count : 0)) << name << " trial " << trial;
+                if (withCounts && !ownBands) (taken + 8 <= n ? ended : whole) += 1;
+            }
     }
     // Both outcomes were seen many times: segments that end within the run,
     // and runs taken to their last whole block.

@@ -268,7 +268,8 @@ public:
     // where the segment ends, and the run's last vertices, one by one.
     template <bool withCounts, typename T>
     std::size_t extendRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
-                                  double band) {
+                                  double band, const double* bands = nullptr) {
+        if (n == 0) return 0;
         const detail::SlopeFrame frame = detail::slopeFrame(originZ_, originV_[0], band);
         double hi = window_[0].hi(), lo = window_[0].lo();
         std::uint64_t count = 0;
@@ -276,9 +277,11 @@ public:
         // Depths never fall along a run, so its first and last bound them all.
         const bool fastDepths = n >= 8 && static_cast<double>(z[0]) - originZ_ >= detail::kLeastFastDepth &&
                                 static_cast<double>(z[n - 1]) - originZ_ <= detail::kMostFastDepth;
-        if (fastDepths) taken = detail::takeSlopeBlocks(z, v, withCounts ? counts : nullptr, n, frame, lo, hi, count);
+        if (fastDepths)
+            taken = detail::takeSlopeBlocks(z, v, bands, withCounts ? counts : nullptr, n, frame, lo, hi, count);
         for (; taken < n; ++taken) {
-            const detail::VertexSlopes s = detail::vertexSlopes(z[taken], v[taken], frame);
+            const detail::VertexSlopes s =
+                detail::vertexSlopes(z[taken], v[taken], bands ? detail::withBand(frame, bands[taken]) : frame);
             const double nextHi = std::min(hi, s.top), nextLo = std::max(lo, s.bottom);
             if (!detail::feasibleWindow(nextLo, nextHi, frame.originV, s.dz)) break;
             hi = nextHi;
@@ -291,6 +294,16 @@ public:
         segmentCount_ += count;
         if (taken > 0) lastZ_ = z[taken - 1];
         return taken;
+    }
+
+    // extendRun() of one channel whose vertices have bands of their own (grey
+    // RGB input: the channels' mid-range, its band narrowed by their spread),
+    // each > 0; not centred.
+    std::size_t extendGreyRun(const float* z, const double* mids, const double* bands, const std::uint32_t* counts,
+                              std::size_t n) {
+        if (!open_ || n == 0) return 0;
+        return counts ? extendRunBySlopes<true>(z, mids, counts, n, bands[0], bands)
+                      : extendRunBySlopes<false>(z, mids, counts, n, bands[0], bands);
     }
 
     // Ends the current layer: closes the open segment and makes sure the layer
@@ -747,21 +760,24 @@ struct Compressor::Impl {
     std::size_t pushRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n) {
         const std::size_t nc = static_cast<std::size_t>(options.channels);
         std::size_t i = 0;
+        GreyTargets targets;
         while (i < n) {
-            // Layer ends are decided vertex by vertex; so is the mid-range.
-            const bool plain =
-                kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0 && !grey;
-            if (plain) {
+            // Layer ends are decided vertex by vertex.
+            const bool plain = kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0;
+            if (plain && !grey) {
                 i += options.channels == 1
                          ? greedy.extendRun<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
                          : greedy.extendRun<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
                                                    greedy.window());
                 if (i == n) break;
+            } else if (plain && greyRuns()) {
+                i = pushGreyRun(z, v, counts, n, i, targets);
+                if (i == n) break;
             }
             double values[kMaxChannels];
             for (std::size_t c = 0; c < nc; ++c) values[c] = static_cast<double>(v[i * nc + c]);
             const std::uint32_t count = counts ? counts[i] : 0u;
-            if (plain && greedy.segmentOpen()) {
+            if (plain && !grey && greedy.segmentOpen()) {
                 // The vertex ends the open segment (push() would try it again first).
                 if (options.channels == 1)
                     greedy.pushBeyond<1>(z[i], values, count, greedy.window());
@@ -775,21 +791,75 @@ struct Compressor::Impl {
         return i;
     }
 
+    // Whether grey input goes through pushGreyRun(): not centred, and with a
+    // band > 0 for every grey vertex (a tolerance above 2^-24; see greyTarget()).
+    bool greyRuns() const { return grey && !options.centred && greedy.window() > 0.0; }
+
+    // The channels' mid-range and its band for grey input; false when the
+    // channels are too far apart to stand for one (the builder then widens
+    // to RGB).
+    bool greyTarget(const double* values, double& mid, double& band) const {
+        const double lo = std::min({values[0], values[1], values[2]});
+        const double hi = std::max({values[0], values[1], values[2]});
+        const double spread = hi - lo;
+        if (spread > options.tolerance || (spread > 0.0 && options.tolerance < 4.0 * kStoreRounding)) return false;
+        mid = 0.5 * (lo + hi);
+        band = greedy.window() - 0.5 * spread;
+        return true;
+    }
+
+    // Run indices [begin, end) whose grey targets greyMids and greyBands hold
+    // (from their index 0), within one pushRun().
+    struct GreyTargets {
+        std::size_t begin = 0, end = 0;
+    };
+
+    // The grey vertices of a run from i on that extend the open segment,
+    // taken as a run of their mid-ranges, each with its band: what pushGrey()
+    // would do vertex by vertex. Returns the index of the first vertex it did
+    // not take: one that ends the segment or whose channels disagree (push()
+    // takes those). Targets are worked out a chunk ahead and kept in
+    // `targets`, so that the next segment's vertices reuse them.
+    template <typename T>
+    std::size_t pushGreyRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, std::size_t i,
+                            GreyTargets& targets) {
+        constexpr std::size_t kChunk = 256;
+        if (greyMids.size() < kChunk) {
+            greyMids.resize(kChunk);
+            greyBands.resize(kChunk);
+        }
+        while (i < n) {
+            if (i < targets.begin || i >= targets.end) {
+                targets = {i, i};
+                for (; targets.end < n && targets.end - i < kChunk; ++targets.end) {
+                    const T* c = v + targets.end * kMaxChannels;
+                    const double values[kMaxChannels] = {static_cast<double>(c[0]), static_cast<double>(c[1]),
+                                                         static_cast<double>(c[2])};
+                    if (!greyTarget(values, greyMids[targets.end - i], greyBands[targets.end - i])) break;
+                }
+                if (targets.end == i) break;  // the channels disagree at i
+            }
+            const std::size_t from = i - targets.begin, available = targets.end - i;
+            const std::size_t taken = greedy.extendGreyRun(z + i, greyMids.data() + from, greyBands.data() + from,
+                                                           counts ? counts + i : nullptr, available);
+            i += taken;
+            if (taken < available) break;  // the segment ends at i
+        }
+        return i;
+    }
+
     // The mid-range m of the channels stands for all three while their spread
     // s stays within the tolerance: its target window m +- (window - s / 2)
     // keeps every channel within the full window.
     void pushGrey(float z, const double* values, std::uint32_t count) {
-        const double lo = std::min({values[0], values[1], values[2]});
-        const double hi = std::max({values[0], values[1], values[2]});
-        const double spread = hi - lo;
-        if (spread > options.tolerance || (spread > 0.0 && options.tolerance < 4.0 * kStoreRounding)) {
+        double mid, band;
+        if (!greyTarget(values, mid, band)) {
             grey = false;
             greedy.widen();
             greedy.push<3>(z, values, count, greedy.window());
             return;
         }
-        const double mid = 0.5 * (lo + hi);
-        greedy.push<1>(z, &mid, count, greedy.window() - 0.5 * spread);
+        greedy.push<1>(z, &mid, count, band);
     }
 
     void startLayer() {
@@ -803,6 +873,7 @@ struct Compressor::Impl {
     CompressorOptions options;
     bool grey;  // the greedy builder runs on the channels' mid-range
     Greedy greedy;
+    std::vector<double> greyMids, greyBands;  // pushGreyRun()'s targets, kept from run to run
     int resetsLeft = 0;
     bool layerEnding = false;  // a vertex at or below tolerance was seen
     float layerEndZ = 0.0f;

@@ -29,14 +29,14 @@ const SlopeBlockVariants& chosenSlopeBlocks() {
 
 }  // namespace
 
-std::size_t takeSlopeBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,
-                            const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
-    return chosenSlopeBlocks().floats(z, v, counts, n, frame, lo, hi, count);
+std::size_t takeSlopeBlocks(const float* z, const float* v, const double* bands, const std::uint32_t* counts,
+                            std::size_t n, const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
+    return chosenSlopeBlocks().floats(z, v, bands, counts, n, frame, lo, hi, count);
 }
 
-std::size_t takeSlopeBlocks(const float* z, const double* v, const std::uint32_t* counts, std::size_t n,
-                            const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
-    return chosenSlopeBlocks().doubles(z, v, counts, n, frame, lo, hi, count);
+std::size_t takeSlopeBlocks(const float* z, const double* v, const double* bands, const std::uint32_t* counts,
+                            std::size_t n, const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
+    return chosenSlopeBlocks().doubles(z, v, bands, counts, n, frame, lo, hi, count);
 }
 
 }  // namespace dsm::detail

@@ -70,28 +70,35 @@ static inline VertexSlopes vertexSlopes(float z, T v, const SlopeFrame& f) {
     return {(value + f.topOffset) * inverse, (value + f.bottomOffset) * inverse, dz};
 }
 
+// The frame of a vertex with a band of its own (grey RGB input, whose band
+// narrows with its channels' spread): the same offsets slopeFrame() makes.
+static inline SlopeFrame withBand(const SlopeFrame& f, double band) {
+    return slopeFrame(f.originZ, f.originV, band);
+}
+
 // Takes the leading whole blocks of eight vertices of a run that keep the
 // window [lo, hi] feasible at their last vertex (so at every vertex: see
 // feasibleWindow()), narrowing the window by each and adding their counts
-// (when counts is not null) to count. Returns how many vertices it took, a
+// (when counts is not null) to count. Each vertex's band is the frame's, or
+// bands[i] when bands is not null. Returns how many vertices it took, a
 // multiple of eight; the block where the segment ends and the run's last
 // vertices are left to vertexSlopes(). Preconditions: depths never fall along
 // the run, and every depth difference from the origin is in
 // [kLeastFastDepth, kMostFastDepth]. Runs on AVX2 where the processor has it.
-DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const float* v, const std::uint32_t* counts,
-                                                std::size_t n, const SlopeFrame& frame, double& lo, double& hi,
-                                                std::uint64_t& count);
-DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const double* v, const std::uint32_t* counts,
-                                                std::size_t n, const SlopeFrame& frame, double& lo, double& hi,
-                                                std::uint64_t& count);
+DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const float* v, const double* bands,
+                                                const std::uint32_t* counts, std::size_t n, const SlopeFrame& frame,
+                                                double& lo, double& hi, std::uint64_t& count);
+DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const double* v, const double* bands,
+                                                const std::uint32_t* counts, std::size_t n, const SlopeFrame& frame,
+                                                double& lo, double& hi, std::uint64_t& count);
 
 // takeSlopeBlocks() on the baseline instruction set, and on AVX2 (null where
 // the library was built without it, or the processor lacks it): for the
 // tests, which check that the two agree bit for bit.
-using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
-                                            const SlopeFrame&, double&, double&, std::uint64_t&);
-using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
-                                             const SlopeFrame&, double&, double&, std::uint64_t&);
+using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const double*, const std::uint32_t*,
+                                            std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
+using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const double*, const std::uint32_t*,
+                                             std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
 struct SlopeBlockVariants {
     SlopeBlocksOfFloats floats;
     SlopeBlocksOfDoubles doubles;

@@ -59,21 +59,44 @@ struct EightSlopes {
     double lastDz;
 };
 
-template <typename T>
-[[gnu::always_inline]] inline void eightSlopes(const float* z, const T* v, float originZ, double topOffset,
-                                               double bottomOffset, EightSlopes& out) {
+// The offsets of four vertices' target windows: the frame's, or each
+// vertex's own band's (withBand()'s operations).
+struct Offsets {
+    double top, bottom;      // the frame's
+    const double* bands;     // or null
+};
+
+template <bool ownBands>
+[[gnu::always_inline]] inline void offsetsOf(const Offsets& o, double originV, std::size_t at, Double4& top,
+                                             Double4& bottom) {
+    if constexpr (ownBands) {
+        Double4 band;
+        std::memcpy(&band, o.bands + at, sizeof band);
+        top = band - originV;
+        bottom = -band - originV;
+    } else {
+        top = Double4{o.top, o.top, o.top, o.top};
+        bottom = Double4{o.bottom, o.bottom, o.bottom, o.bottom};
+    }
+}
+
+template <bool ownBands, typename T>
+[[gnu::always_inline]] inline void eightSlopes(const float* z, const T* v, std::size_t at, float originZ,
+                                               double originV, const Offsets& offsets, EightSlopes& out) {
     Double4 top[2], bottom[2], dz;
     for (int h = 0; h < 2; ++h) {
+        const std::size_t i = at + 4 * static_cast<std::size_t>(h);
         Float4 depth;
-        std::memcpy(&depth, z + 4 * h, sizeof depth);
+        std::memcpy(&depth, z + i, sizeof depth);
         widen(depth, dz);
         dz -= static_cast<double>(originZ);
         // fastInverse(), four lanes at once: the same operations.
         Double4 q;
         widen(1.0f / (depth - originZ), q);
         const Double4 inverse = q * (2.0 - dz * q);
-        Double4 value;
-        loadValues(v + 4 * h, value);
+        Double4 value, topOffset, bottomOffset;
+        loadValues(v + i, value);
+        offsetsOf<ownBands>(offsets, originV, i, topOffset, bottomOffset);
         top[h] = (value + topOffset) * inverse;
         bottom[h] = (value + bottomOffset) * inverse;
     }
@@ -103,15 +126,15 @@ template <bool withCounts>
 // `blocks` blocks of eight vertices, taken when the window (hi, lo) narrowed
 // by all of them is feasible at their last vertex; otherwise the window is
 // left as it was. Returns whether it took them.
-template <int blocks, bool withCounts, typename T>
-[[gnu::always_inline]] inline bool takeBlocks(const float* z, const T* v, const std::uint32_t* counts,
-                                              float originZ, double originV, double topOffset,
-                                              double bottomOffset, Double4& hi, Double4& lo, Sum4& sum) {
+template <int blocks, bool withCounts, bool ownBands, typename T>
+[[gnu::always_inline]] inline bool takeBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t at,
+                                              float originZ, double originV, const Offsets& offsets, Double4& hi,
+                                              Double4& lo, Sum4& sum) {
     Double4 nextHi = hi, nextLo = lo;
     double lastDz = 0.0;
     for (int b = 0; b < blocks; ++b) {
         EightSlopes slopes;
-        eightSlopes(z + 8 * b, v + 8 * b, originZ, topOffset, bottomOffset, slopes);
+        eightSlopes<ownBands>(z, v, at + 8 * static_cast<std::size_t>(b), originZ, originV, offsets, slopes);
         nextHi = slopes.least < nextHi ? slopes.least : nextHi;
         nextLo = slopes.greatest > nextLo ? slopes.greatest : nextLo;
         lastDz = slopes.lastDz;
@@ -122,7 +145,7 @@ template <int blocks, bool withCounts, typename T>
     if constexpr (withCounts)
         for (int b = 0; b < blocks; ++b) {
             Count4 c[2];
-            std::memcpy(c, counts + 8 * b, sizeof c);
+            std::memcpy(c, counts + at + 8 * static_cast<std::size_t>(b), sizeof c);
             sum += __builtin_convertvector(c[0], Sum4) + __builtin_convertvector(c[1], Sum4);
         }
     return true;
@@ -134,23 +157,20 @@ template <int blocks, bool withCounts, typename T>
 // is made once for 32 vertices; where the segment ends within four blocks,
 // they are taken again one at a time (their slopes computed again), so that
 // at most one block is left to be walked vertex by vertex.
-template <bool withCounts, typename T>
-std::size_t slopeBlocksOf(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
-                          const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
+template <bool withCounts, bool ownBands, typename T>
+std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const std::uint32_t* counts,
+                          std::size_t n, const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
     // Locals, not the references and the frame: stores through those could
     // alias the input as far as the compiler knows.
     const float originZ = f.originZ;
-    const double originV = f.originV, topOffset = f.topOffset,
-                 bottomOffset = f.bottomOffset;
+    const double originV = f.originV;
+    const Offsets offsets{f.topOffset, f.bottomOffset, ownBands ? bands : nullptr};
     Double4 windowLo = {lo, lo, lo, lo}, windowHi = {hi, hi, hi, hi};
     std::size_t i = 0;
     Sum4 sum = {};
-    const auto countsAt = [&](std::size_t at) { return withCounts ? counts + at : counts; };
-    while (i + 32 <= n && takeBlocks<4, withCounts>(z + i, v + i, countsAt(i), originZ, originV, topOffset,
-                                                    bottomOffset, windowHi, windowLo, sum))
+    while (i + 32 <= n && takeBlocks<4, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
         i += 32;
-    while (i + 8 <= n && takeBlocks<1, withCounts>(z + i, v + i, countsAt(i), originZ, originV, topOffset,
-                                                   bottomOffset, windowHi, windowLo, sum))
+    while (i + 8 <= n && takeBlocks<1, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
         i += 8;
     hi = lesser(lesser(windowHi[0], windowHi[1]), lesser(windowHi[2], windowHi[3]));
     lo = greater(greater(windowLo[0], windowLo[1]), greater(windowLo[2], windowLo[3]));
@@ -159,10 +179,13 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const std::uint32_t* count
 }
 
 template <typename T>
-std::size_t slopeBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+std::size_t slopeBlocks(const float* z, const T* v, const double* bands, const std::uint32_t* counts, std::size_t n,
                         const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
-    return counts ? slopeBlocksOf<true>(z, v, counts, n, f, lo, hi, count)
-                  : slopeBlocksOf<false>(z, v, counts, n, f, lo, hi, count);
+    if (bands)
+        return counts ? slopeBlocksOf<true, true>(z, v, bands, counts, n, f, lo, hi, count)
+                      : slopeBlocksOf<false, true>(z, v, bands, counts, n, f, lo, hi, count);
+    return counts ? slopeBlocksOf<true, false>(z, v, bands, counts, n, f, lo, hi, count)
+                  : slopeBlocksOf<false, false>(z, v, bands, counts, n, f, lo, hi, count);
 }
 
 }  // namespace
