@@ -301,9 +301,10 @@ public:
     // each > 0; not centred.
     std::size_t extendGreyRun(const float* z, const double* mids, const double* bands, const std::uint32_t* counts,
                               std::size_t n) {
-        if (!open_ || n == 0) return 0;
-        return counts ? extendRunBySlopes<true>(z, mids, counts, n, bands[0], bands)
-                      : extendRunBySlopes<false>(z, mids, counts, n, bands[0], bands);
+        if (!open_) return 0;
+        // The run's own band (band_) is not read where each vertex has one.
+        return counts ? extendRunBySlopes<true>(z, mids, counts, n, band_, bands)
+                      : extendRunBySlopes<false>(z, mids, counts, n, band_, bands);
     }
 
     // Ends the current layer: closes the open segment and makes sure the layer

@@ -19,23 +19,15 @@ using Float4 = float __attribute__((vector_size(16)));
 using Count4 = std::uint32_t __attribute__((vector_size(16)));
 using Sum4 = std::uint64_t __attribute__((vector_size(32)));
 
-// Conversions between four floats and four doubles. The compiler's generic
-// conversion splits them in halves even where one AVX instruction does it.
-// Results go through references: a function returning a 32-byte vector has
-// another ABI with AVX than without.
+// Four floats as four doubles. The compiler's generic conversion splits it in
+// halves even where one AVX instruction does it. The result goes through a
+// reference: a function returning a 32-byte vector has another ABI with AVX
+// than without.
 inline void widen(const Float4& f, Double4& out) {
 #ifdef __AVX__
     out = reinterpret_cast<Double4>(_mm256_cvtps_pd(reinterpret_cast<__m128>(f)));
 #else
     out = __builtin_convertvector(f, Double4);
-#endif
-}
-
-inline void narrow(const Double4& d, Float4& out) {
-#ifdef __AVX__
-    out = reinterpret_cast<Float4>(_mm256_cvtpd_ps(reinterpret_cast<__m256d>(d)));
-#else
-    out = __builtin_convertvector(d, Float4);
 #endif
 }
 
@@ -51,6 +43,10 @@ inline void loadValues(const double* v, Double4& out) { std::memcpy(&out, v, siz
 // copy of those that the AVX2 unit compiled could be linked in everywhere.
 inline double lesser(double a, double b) { return b < a ? b : a; }
 inline double greater(double a, double b) { return b > a ? b : a; }
+
+// The least and the greatest of four lanes: a window's bounds.
+inline double leastLane(const Double4& d) { return lesser(lesser(d[0], d[1]), lesser(d[2], d[3])); }
+inline double greatestLane(const Double4& d) { return greater(greater(d[0], d[1]), greater(d[2], d[3])); }
 
 // Eight vertices' least top slope and greatest bottom slope, four lanes each,
 // and the last vertex's depth beyond the origin.
@@ -109,11 +105,10 @@ template <bool ownBands, typename T>
 // greatest lo) is feasible at lastDz.
 [[gnu::always_inline]] inline bool feasibleLanes(const Double4& hi, const Double4& lo, double originV,
                                                  double lastDz) {
-    const double leastHi = lesser(lesser(hi[0], hi[1]), lesser(hi[2], hi[3]));
-    const double greatestLo = greater(greater(lo[0], lo[1]), greater(lo[2], lo[3]));
-    return feasibleWindow(greatestLo, leastHi, originV, lastDz);
+    return feasibleWindow(greatestLane(lo), leastLane(hi), originV, lastDz);
 }
 
+// The counts of a block of eight vertices, added to four lanes of sums.
 template <bool withCounts>
 [[gnu::always_inline]] inline void addCounts(const std::uint32_t* counts, Sum4& sum) {
     if constexpr (withCounts) {
@@ -142,12 +137,7 @@ template <int blocks, bool withCounts, bool ownBands, typename T>
     if (!feasibleLanes(nextHi, nextLo, originV, lastDz)) return false;
     hi = nextHi;
     lo = nextLo;
-    if constexpr (withCounts)
-        for (int b = 0; b < blocks; ++b) {
-            Count4 c[2];
-            std::memcpy(c, counts + at + 8 * static_cast<std::size_t>(b), sizeof c);
-            sum += __builtin_convertvector(c[0], Sum4) + __builtin_convertvector(c[1], Sum4);
-        }
+    for (int b = 0; b < blocks; ++b) addCounts<withCounts>(counts + at + 8 * static_cast<std::size_t>(b), sum);
     return true;
 }
 
@@ -172,8 +162,8 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
         i += 32;
     while (i + 8 <= n && takeBlocks<1, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
         i += 8;
-    hi = lesser(lesser(windowHi[0], windowHi[1]), lesser(windowHi[2], windowHi[3]));
-    lo = greater(greater(windowLo[0], windowLo[1]), greater(windowLo[2], windowLo[3]));
+    hi = leastLane(windowHi);
+    lo = greatestLane(windowLo);
     count += sum[0] + sum[1] + sum[2] + sum[3];
     return i;
 }
