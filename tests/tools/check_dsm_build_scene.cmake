@@ -3,7 +3,8 @@
 #
 #   cmake -DCHECK=<check> -DDSM_BUILD=<dsm-build> -DWORK_DIR=<fresh dir> -P check_dsm_build_scene.cmake
 #
-# Checks: endless_stdin max_scene_mb max_scene_mb_usage deep_nesting long_key hairball_curl tiny_step.
+# Checks: endless_stdin max_scene_mb max_scene_mb_usage deep_nesting long_key hairball_curl tiny_step
+# vdb_module (with -DWITH_OPENVDB=ON|OFF).
 # Every run has a timeout: before these limits some of them never ended.
 cmake_minimum_required(VERSION 3.25)
 
@@ -101,6 +102,54 @@ elseif(CHECK STREQUAL "tiny_step")
     \"density\": {\"type\": \"homogeneous\", \"value\": 1}, \"step\": 1e-300}]}")
   build(/dev/null "${SCENE}" -o "${MAP}")
   expect_refused("dsm-build: ERROR scene '${SCENE}': /objects/0/step: expected a number in [1e-12, 1e+12], got 1e-300")
+
+elseif(CHECK STREQUAL "vdb_module")
+  # OpenVDB is loaded only when a scene reads a VDB file, from a module of its
+  # own (libdsm/build/src/vdb_module.h): dsm-build does not link it, a missing
+  # or broken module is a one-line error naming the file, and the module
+  # built beside dsm-build is found without help. The grid file's bytes are not
+  # a VDB file, so even the module found refuses it, after reading it.
+  set(grid "${WORK_DIR}/cloud.vdb")
+  file(WRITE "${grid}" "not a vdb file at all")
+  file(WRITE "${SCENE}" "{${LIGHT}, \"objects\": [{\"type\": \"volume\", \"bounds\": [[-1, -1, -1], [1, 1, 1]],
+    \"density\": {\"type\": \"vdb\", \"file\": \"cloud.vdb\"}}]}")
+  find_program(READELF readelf)
+  if(READELF)
+    execute_process(COMMAND ${READELF} -d ${DSM_BUILD} OUTPUT_VARIABLE dynamic RESULT_VARIABLE rc)
+    if(NOT rc EQUAL 0 OR NOT dynamic MATCHES "NEEDED")
+      fail("readelf -d ${DSM_BUILD} did not list its libraries")
+    endif()
+    if(dynamic MATCHES "openvdb")
+      fail("dsm-build links OpenVDB:\n${dynamic}")
+    endif()
+  endif()
+  if(NOT WITH_OPENVDB)
+    build(/dev/null "${SCENE}" -o "${MAP}")
+    expect_refused("dsm-build: ERROR ")
+    expect_contains(ERR "VDB file '${grid}': this libdsm was built without OpenVDB")
+    return()
+  endif()
+  # build_with_module(module): dsm-build with DSM_VDB_MODULE set to `module`.
+  function(build_with_module module)
+    execute_process(COMMAND ${CMAKE_COMMAND} -E env "DSM_VDB_MODULE=${module}" ${DSM_BUILD} "${SCENE}" -o "${MAP}"
+      INPUT_FILE /dev/null TIMEOUT 30 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
+    set(RC "${rc}" PARENT_SCOPE)
+    set(OUT "${out}" PARENT_SCOPE)
+    set(ERR "${err}" PARENT_SCOPE)
+    set(LAST_COMMAND "DSM_VDB_MODULE=${module} dsm-build ${SCENE} -o ${MAP}" PARENT_SCOPE)
+  endfunction()
+  build_with_module("${WORK_DIR}/missing/libdsm_vdb.so")
+  expect_refused("dsm-build: ERROR ")
+  expect_contains(ERR "VDB file '${grid}': the OpenVDB module libdsm_vdb.so was not found (looked for ${WORK_DIR}/missing/libdsm_vdb.so; DSM_VDB_MODULE may name it)")
+  build_with_module("${SCENE}")
+  expect_refused("dsm-build: ERROR ")
+  expect_contains(ERR "VDB file '${grid}': the OpenVDB module '${SCENE}' does not load: ")
+  build(/dev/null "${SCENE}" -o "${MAP}")
+  expect_refused("dsm-build: ERROR ")
+  expect_contains(ERR "VDB file '${grid}': ")
+  if(ERR MATCHES "OpenVDB module")
+    fail("the module built beside dsm-build was not found")
+  endif()
 
 else()
   message(FATAL_ERROR "check_dsm_build_scene.cmake: unknown CHECK '${CHECK}'")

@@ -7,18 +7,16 @@
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
-#include <mutex>
+#include <memory>
 #include <string>
 #include <system_error>
-
-#if DSM_WITH_OPENVDB
-#include <openvdb/openvdb.h>
-#include <openvdb/tools/Interpolation.h>
-#endif
 
 #include "dsm/error.h"
 #include "splitmix64.h"
 #include "text.h"
+#if DSM_WITH_OPENVDB
+#include "vdb_module_loader.h"
+#endif
 
 DSM_NAMESPACE_BEGIN
 namespace {
@@ -160,70 +158,41 @@ private:
 };
 
 // ---------------------------------------------------------------------------
-// OpenVDB (when built with it: DSM_WITH_OPENVDB).
+// OpenVDB grids, through the module that links OpenVDB (vdb_module.h), when
+// built with it (DSM_WITH_OPENVDB).
 #if DSM_WITH_OPENVDB
 
-void initializeOpenVdb() {
-    static std::once_flag once;
-    std::call_once(once, [] { openvdb::initialize(); });
-}
+std::string vdbWhere(const VdbDensity& vdb) { return "VDB file '" + detail::clip(vdb.file, detail::kMaxQuotedPath) + "'"; }
 
-openvdb::FloatGrid::ConstPtr loadFloatGrid(const VdbDensity& vdb) {
-    initializeOpenVdb();
-    const std::string where = "VDB file '" + detail::clip(vdb.file, detail::kMaxQuotedPath) + "'";
+// A grid read by the module, released with it.
+using VdbGridPtr = std::shared_ptr<const DsmVdbGrid>;
+
+VdbGridPtr loadFloatGrid(const VdbDensity& vdb) {
     std::error_code ec;
     if (!std::filesystem::is_regular_file(vdb.file, ec))
-        throw Error(ErrorCode::io, where + ": does not exist or is not a file", vdb.file);
-    openvdb::GridBase::Ptr base;
-    try {
-        openvdb::io::File file(vdb.file);
-        file.open(/*delayLoad=*/false);
-        if (!file.hasGrid(vdb.grid)) {
-            std::string names;
-            for (auto it = file.beginName(); it != file.endName(); ++it)
-                names += (names.empty() ? "'" : ", '") + detail::clip(*it) + "'";
-            file.close();
-            throw Error(ErrorCode::scene,
-                        where + ": has no grid '" + detail::clip(vdb.grid) +
-                            "' (grids: " + detail::clip(names.empty() ? "none" : names, detail::kMaxQuotedPath) + ")",
-                        vdb.file);
-        }
-        base = file.readGrid(vdb.grid);
-        file.close();
-    } catch (const openvdb::IoError& e) {
-        throw Error(ErrorCode::io, where + ": " + detail::clip(e.what()), vdb.file);
-    } catch (const openvdb::Exception& e) {
-        throw Error(ErrorCode::format, where + ": " + detail::clip(e.what()), vdb.file);
-    } catch (const std::bad_alloc&) {
-        throw Error(ErrorCode::limit, where + ": out of memory reading the grid", vdb.file);
-    } catch (const std::exception& e) {
-        if (dynamic_cast<const Error*>(&e)) throw;
-        throw Error(ErrorCode::format, where + ": " + detail::clip(e.what()), vdb.file);
-    }
-    openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
-    if (!grid)
-        throw Error(ErrorCode::scene, where + ": grid '" + detail::clip(vdb.grid) + "' holds " + base->valueType() +
-                                          " values; expected a float grid",
-                    vdb.file);
-    return grid;
+        throw Error(ErrorCode::io, vdbWhere(vdb) + ": does not exist or is not a file", vdb.file);
+    const DsmVdbModule& module = vdbModule(vdb.file);
+    int code = 0;
+    char message[1024];
+    DsmVdbGrid* grid = module.readGrid(vdb.file.c_str(), vdb.grid.c_str(), &code, message, sizeof message);
+    if (!grid) throw Error(static_cast<ErrorCode>(code), vdbWhere(vdb) + ": " + message, vdb.file);
+    return VdbGridPtr(grid, module.release);
 }
 
 class VdbField final : public BoxedField {
 public:
-    VdbField(const Volume& v, openvdb::FloatGrid::ConstPtr grid) : BoxedField(v), grid_(std::move(grid)) {}
+    VdbField(const Volume& v, const VdbDensity& vdb, VdbGridPtr grid)
+        : BoxedField(v), module_(vdbModule(vdb.file)), grid_(std::move(grid)) {}
 
     double density(const Vec3& p) const override {
         if (!inside(p)) return 0.0;
-        const openvdb::Vec3d index = grid_->transform().worldToIndex(openvdb::Vec3d(p[0], p[1], p[2]));
-        // An unregistered accessor of our own per call: nothing is shared
-        // between threads, and the eight lookups of one sample share its cache.
-        openvdb::tree::ValueAccessor<const openvdb::FloatTree, false> accessor(grid_->tree());
-        const float value = openvdb::tools::BoxSampler::sample(accessor, index);
+        const float value = module_.sample(grid_.get(), p.data());
         return std::isfinite(value) && value > 0.0f ? static_cast<double>(value) : 0.0;
     }
 
 private:
-    openvdb::FloatGrid::ConstPtr grid_;
+    const DsmVdbModule& module_;
+    VdbGridPtr grid_;
 };
 #else
 [[noreturn]] void noOpenVdb(const VdbDensity& vdb) {
@@ -247,7 +216,7 @@ std::unique_ptr<DensityField> makeDensityField(const Volume& volume) {
         return std::make_unique<NoiseCloudField>(volume, *n);
     const auto& vdb = std::get<VdbDensity>(volume.density);
 #if DSM_WITH_OPENVDB
-    return std::make_unique<VdbField>(volume, loadFloatGrid(vdb));
+    return std::make_unique<VdbField>(volume, vdb, loadFloatGrid(vdb));
 #else
     noOpenVdb(vdb);
 #endif
@@ -259,24 +228,10 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
     (void)boundsMax;
     noOpenVdb(vdb);
 #else
-    const openvdb::FloatGrid::ConstPtr grid = loadFloatGrid(vdb);
-    const openvdb::CoordBBox box = grid->evalActiveVoxelBoundingBox();
-    if (box.empty())
-        throw Error(ErrorCode::scene, "VDB file '" + detail::clip(vdb.file, detail::kMaxQuotedPath) + "': grid '" +
-                                          detail::clip(vdb.grid) + "' has no active voxels",
+    const VdbGridPtr grid = loadFloatGrid(vdb);
+    if (!vdbModule(vdb.file).activeBounds(grid.get(), boundsMin.data(), boundsMax.data()))
+        throw Error(ErrorCode::scene, vdbWhere(vdb) + ": grid '" + detail::clip(vdb.grid) + "' has no active voxels",
                     vdb.file);
-    const openvdb::Vec3d lo = box.min().asVec3d() - openvdb::Vec3d(1.0), hi = box.max().asVec3d() + openvdb::Vec3d(1.0);
-    boundsMin = {HUGE_VAL, HUGE_VAL, HUGE_VAL};
-    boundsMax = {-HUGE_VAL, -HUGE_VAL, -HUGE_VAL};
-    for (int corner = 0; corner < 8; ++corner) {
-        const openvdb::Vec3d c((corner & 1) ? hi.x() : lo.x(), (corner & 2) ? hi.y() : lo.y(),
-                               (corner & 4) ? hi.z() : lo.z());
-        const openvdb::Vec3d w = grid->transform().indexToWorld(c);
-        for (std::size_t i = 0; i < 3; ++i) {
-            boundsMin[i] = std::min(boundsMin[i], w[static_cast<int>(i)]);
-            boundsMax[i] = std::max(boundsMax[i], w[static_cast<int>(i)]);
-        }
-    }
 #endif
 }
 
