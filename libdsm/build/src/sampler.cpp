@@ -13,6 +13,7 @@
 #include <nlohmann/json.hpp>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/task_arena.h>
+#include <tbb/parallel_invoke.h>
 #include <tbb/parallel_pipeline.h>
 
 #include "dsm/build_visibility.h"
@@ -520,9 +521,19 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 tbb::make_filter<std::uint64_t, void>(tbb::filter_mode::serial_in_order, writeTile));
     });
     if (options.progress) options.progress(1.0);
-    const auto start = Clock::now();
-    writer.finish();
-    result.writingSeconds += since(start);
+    // The writer's last levels and directory are written while the build's
+    // other threads free what the tiles held: each thread's workspace and the
+    // tiles in flight, megabytes of small blocks, whose freeing took one
+    // thread about 14 ms after a 512² build.
+    arena.execute([&] {
+        tbb::parallel_invoke(
+            [&] {
+                const auto start = Clock::now();
+                writer.finish();
+                result.writingSeconds += since(start);
+            },
+            [&] { workspaces.clear(); }, [&] { std::vector<std::vector<VisibilityFunction>>().swap(slotTiles); });
+    });
     result.pixels = std::uint64_t(region[2] - region[0]) * (region[3] - region[1]);
     result.rawBytes = result.sampleVertices * (4u + 4u * static_cast<unsigned>(channels));
     std::error_code ignored;
