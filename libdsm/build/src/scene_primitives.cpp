@@ -18,6 +18,33 @@ double linearScale(const Affine& m) { return std::cbrt(std::abs(determinant3(m))
 }  // namespace
 
 ScenePrimitives::ScenePrimitives(const Scene& scene) {
+    // Room for every primitive first: filling the arrays as they grew copied
+    // the hair ball's 120,000 segments over and over (4-5 ms before a build
+    // could start).
+    std::size_t triangles = 0, spheres = 0, quads = 0, segments = 0;
+    for (const SceneObject& object : scene.objects)
+        std::visit(
+            [&](const auto& g) {
+                using G = std::decay_t<decltype(g)>;
+                if constexpr (std::is_same_v<G, TriangleMesh>) triangles += g.triangles.size();
+                if constexpr (std::is_same_v<G, dsm::Sphere>) ++spheres;
+                if constexpr (std::is_same_v<G, dsm::Quad>) ++quads;
+                if constexpr (std::is_same_v<G, Curves>) {
+                    std::size_t first = 0;  // curves beyond the points are refused below
+                    for (std::uint32_t n : g.pointsPerCurve) {
+                        if (first + n > g.points.size()) break;
+                        segments += n > 0 ? n - 1 : 0;
+                        first += n;
+                    }
+                }
+            },
+            object.geometry);
+    triangles_.reserve(triangles);
+    spheres_.reserve(spheres);
+    quads_.reserve(quads);
+    segments_.reserve(segments);
+    primitives_.reserve(triangles + spheres + quads + segments);
+    motion_.reserve(scene.objects.size());
     for (std::uint32_t o = 0; o < scene.objects.size(); ++o) {
         const SceneObject& object = scene.objects[o];
         const std::string what = concat("object ", o, " '", clip(object.name), "'");
