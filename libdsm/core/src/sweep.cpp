@@ -402,11 +402,18 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
     // Three steps of the loops below, shared by the heap and the flat path
     // (always inlined: called as functions they cost the flat path a tenth).
     // The value just before depth z, where the next events are.
+    // Where nothing slopes (the flat path), the value has not moved since it
+    // was emitted, in [0, lastEmitted]: the same doubles without the slope's
+    // term and the clamp.
     const auto arrive = [&](float z) __attribute__((always_inline)) {
         for (std::size_t c = 0; c < nc; ++c) {
-            left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
-            left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
-            value[c] = left[c];
+            if constexpr (Sloped) {
+                left[c] = value[c] + outSlope[c] * (static_cast<double>(z) - zCurrent);
+                left[c] = std::clamp(left[c], 0.0, lastEmitted[c]);
+                value[c] = left[c];
+            } else {
+                left[c] = value[c];
+            }
         }
         zCurrent = z;
     };
@@ -424,16 +431,18 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
     const auto leave = [&](float z, std::uint64_t count) __attribute__((always_inline)) {
         bool step = false;
         for (std::size_t c = 0; c < nc; ++c) {
-            if (sloped.empty()) {
-                outSlope[c] = 0.0;
-                slopeMagnitude[c] = 0.0;
-            } else if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
-                double exact = 0.0;
-                for (std::uint32_t k : sloped) exact += w[k] * inputs[k]->changes(next[k] - 1)[nc + c];
-                outSlope[c] = exact;
-                slopeMagnitude[c] = std::abs(exact);
+            if constexpr (Sloped) {
+                if (sloped.empty()) {
+                    outSlope[c] = 0.0;
+                    slopeMagnitude[c] = 0.0;
+                } else if (slopeMagnitude[c] > kCancellationLimit * std::abs(outSlope[c])) {
+                    double exact = 0.0;
+                    for (std::uint32_t k : sloped) exact += w[k] * inputs[k]->changes(next[k] - 1)[nc + c];
+                    outSlope[c] = exact;
+                    slopeMagnitude[c] = std::abs(exact);
+                }
+                outSlope[c] = std::min(outSlope[c], 0.0);
             }
-            outSlope[c] = std::min(outSlope[c], 0.0);
             value[c] = std::clamp(value[c], 0.0, left[c]);
             if (zeroCount[c] == positive) {
                 value[c] = 0.0;
@@ -445,7 +454,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
         const std::uint32_t count32 = static_cast<std::uint32_t>(count);
         if (!sink.push(z, left, step ? 0u : count32)) return false;
         if (step && !sink.push(z, value, count32)) return false;
-        std::copy(value, value + nc, lastEmitted);
+        if constexpr (Sloped) std::copy(value, value + nc, lastEmitted);
         return true;
     };
 
