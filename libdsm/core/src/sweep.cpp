@@ -254,6 +254,7 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
 
 struct Sweeper::Impl {
     std::vector<double> w;
+    std::size_t positiveWeights = 0;  // of w
     std::vector<std::size_t> next;
     std::vector<std::uint32_t> sloped;
     std::vector<std::uint32_t> slopedAt;
@@ -290,39 +291,50 @@ struct Sweeper::Impl {
         if (!any) return std::nullopt;
         if (prepared.size() < inputs.size()) prepared.resize(inputs.size());  // never shrunk: each keeps its storage
         preparedInputs.clear();
+        InputScan scan;
         for (std::size_t k = 0; k < inputs.size(); ++k) {
             prepared[k].assign(VisibilityView(inputs[k]));
             preparedInputs.push_back(&prepared[k]);
+            scan.add(prepared[k]);
         }
-        return dispatch(Span<const SweepInput* const>(preparedInputs), channels, sink);
+        return dispatch(Span<const SweepInput* const>(preparedInputs), channels, scan, sink);
     }
 
     template <class Sink>
     std::optional<float> runPrepared(Span<const SweepInput* const> inputs, Span<const double> weights, int channels,
                                      Sink& sink) {
+        // What dispatch() needs, gathered in the same pass over the inputs.
+        InputScan scan;
         const bool any = normaliseWeights(inputs.size(), weights, channels, [&](std::size_t k) {
-            if (inputs[k]->channels() != channels)
-                throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k]->channels(),
+            const SweepInput& f = *inputs[k];
+            if (f.channels() != channels)
+                throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", f.channels(),
                                                                 " channels, expected ", channels));
+            scan.add(f);
         });
         if (!any) return std::nullopt;
-        return dispatch(inputs, channels, sink);
+        return dispatch(inputs, channels, scan, sink);
     }
 
     // The channel count as a constant lets the compiler unroll the
     // per-channel loops; inputs that are all flat between their steps (rays
     // of surface hits alone) skip the slope bookkeeping, whose terms would
     // all be 0. The arithmetic on values is the same either way.
-    template <class Sink>
-    std::optional<float> dispatch(Span<const SweepInput* const> inputs, int channels, Sink& sink) {
+    // Whether some input slopes, and their steps in all.
+    struct InputScan {
         bool sloped = false;
         std::uint64_t events = 0;
-        for (const SweepInput* f : inputs) {
-            sloped = sloped || f->slopes();
-            events += f->size();
+        void add(const SweepInput& f) {
+            sloped = sloped || f.slopes();
+            events += f.size();
         }
+    };
+    template <class Sink>
+    std::optional<float> dispatch(Span<const SweepInput* const> inputs, int channels, const InputScan& scan,
+                                  Sink& sink) {
+        const std::uint64_t events = scan.events;
         // The flat path numbers its events in 32 bits; the heap serves any input.
-        sloped = sloped || events > UINT32_MAX;
+        const bool sloped = scan.sloped || events > UINT32_MAX;
         if (channels == 1) return sloped ? run<1, true>(inputs, events, sink) : run<1, false>(inputs, events, sink);
         return sloped ? run<kMaxChannels, true>(inputs, events, sink) : run<kMaxChannels, false>(inputs, events, sink);
     }
@@ -395,7 +407,11 @@ bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, 
         throw Error(ErrorCode::argument,
                     detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
     w.resize(n);
-    for (std::size_t k = 0; k < n; ++k) w[k] = weights[k] / weightSum;
+    positiveWeights = 0;
+    for (std::size_t k = 0; k < n; ++k) {
+        w[k] = weights[k] / weightSum;
+        positiveWeights += w[k] > 0.0;
+    }
     return true;
 }
 
@@ -411,8 +427,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
     std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
-    std::size_t positive = 0;
-    for (std::size_t k = 0; k < n; ++k) positive += w[k] > 0.0;
+    const std::size_t positive = positiveWeights;
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
