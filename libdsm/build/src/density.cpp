@@ -229,7 +229,10 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
     noOpenVdb(vdb);
 #else
     const VdbGridPtr grid = loadFloatGrid(vdb);
-    if (!vdbModule(vdb.file).activeBounds(grid.get(), boundsMin.data(), boundsMax.data()))
+    const int found = vdbModule(vdb.file).activeBounds(grid.get(), boundsMin.data(), boundsMax.data());
+    if (found < 0)
+        throw Error(ErrorCode::limit, vdbWhere(vdb) + ": out of memory finding the grid's active voxels", vdb.file);
+    if (found == 0)
         throw Error(ErrorCode::scene, vdbWhere(vdb) + ": grid '" + detail::clip(vdb.grid) + "' has no active voxels",
                     vdb.file);
 #endif

@@ -82,7 +82,12 @@ DsmVdbGrid* readGrid(const char* path, const char* gridName, int* errorCode, cha
 }
 
 int activeBounds(const DsmVdbGrid* g, double boundsMin[3], double boundsMax[3]) {
-    const openvdb::CoordBBox box = g->grid->evalActiveVoxelBoundingBox();
+    openvdb::CoordBBox box;
+    try {
+        box = g->grid->evalActiveVoxelBoundingBox();
+    } catch (const std::bad_alloc&) {
+        return -1;
+    }
     if (box.empty()) return 0;
     const openvdb::Vec3d lo = box.min().asVec3d() - openvdb::Vec3d(1.0), hi = box.max().asVec3d() + openvdb::Vec3d(1.0);
     std::fill(boundsMin, boundsMin + 3, HUGE_VAL);

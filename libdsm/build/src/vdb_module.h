@@ -29,8 +29,8 @@ typedef struct DsmVdbModule {
     DsmVdbGrid* (*readGrid)(const char* file, const char* grid, int* errorCode, char* message,
                             std::size_t messageSize);
     /// The box of the grid's active voxels, grown by one voxel on every side
-    /// (the reach of trilinear interpolation), in world space. Returns 0 when
-    /// no voxel is active.
+    /// (the reach of trilinear interpolation), in world space. Returns 1, or 0
+    /// when no voxel is active, or -1 when memory ran out finding them.
     int (*activeBounds)(const DsmVdbGrid* grid, double boundsMin[3], double boundsMax[3]);
     /// The grid's value at world-space point p, interpolated trilinearly, as
     /// stored (it may be negative or not finite).
