@@ -23,14 +23,19 @@ set(SCENE "${WORK_DIR}/scene.json")
 set(LIGHT [=["light": {"type": "spot", "position": [0, 0, -5], "direction": [0, 0, 1], "resolution": 8}]=])
 
 # build(input args...): dsm-build with standard input from `input`, stopped
-# after 30 seconds; sets RC, OUT, ERR and LAST_COMMAND.
+# after 30 seconds, with the environment variables BUILD_ENV lists
+# (NAME=value...) when it is set; sets RC, OUT, ERR and LAST_COMMAND.
 function(build input)
-  execute_process(COMMAND ${DSM_BUILD} ${ARGN} INPUT_FILE "${input}" TIMEOUT 30
+  set(env)
+  if(BUILD_ENV)
+    set(env ${CMAKE_COMMAND} -E env ${BUILD_ENV})
+  endif()
+  execute_process(COMMAND ${env} ${DSM_BUILD} ${ARGN} INPUT_FILE "${input}" TIMEOUT 30
     RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
   set(RC "${rc}" PARENT_SCOPE)
   set(OUT "${out}" PARENT_SCOPE)
   set(ERR "${err}" PARENT_SCOPE)
-  set(LAST_COMMAND "dsm-build ${ARGN} < ${input}" PARENT_SCOPE)
+  set(LAST_COMMAND "${BUILD_ENV} dsm-build ${ARGN} < ${input}" PARENT_SCOPE)
 endfunction()
 
 # A refused scene: status 1, one line starting with `prefix` and at most 600
@@ -129,21 +134,15 @@ elseif(CHECK STREQUAL "vdb_module")
     expect_contains(ERR "VDB file '${grid}': this libdsm was built without OpenVDB")
     return()
   endif()
-  # build_with_module(module): dsm-build with DSM_VDB_MODULE set to `module`.
-  function(build_with_module module)
-    execute_process(COMMAND ${CMAKE_COMMAND} -E env "DSM_VDB_MODULE=${module}" ${DSM_BUILD} "${SCENE}" -o "${MAP}"
-      INPUT_FILE /dev/null TIMEOUT 30 RESULT_VARIABLE rc OUTPUT_VARIABLE out ERROR_VARIABLE err)
-    set(RC "${rc}" PARENT_SCOPE)
-    set(OUT "${out}" PARENT_SCOPE)
-    set(ERR "${err}" PARENT_SCOPE)
-    set(LAST_COMMAND "DSM_VDB_MODULE=${module} dsm-build ${SCENE} -o ${MAP}" PARENT_SCOPE)
-  endfunction()
-  build_with_module("${WORK_DIR}/missing/libdsm_vdb.so")
+  set(BUILD_ENV "DSM_VDB_MODULE=${WORK_DIR}/missing/libdsm_vdb.so")
+  build(/dev/null "${SCENE}" -o "${MAP}")
   expect_refused("dsm-build: ERROR ")
   expect_contains(ERR "VDB file '${grid}': the OpenVDB module libdsm_vdb.so was not found (looked for ${WORK_DIR}/missing/libdsm_vdb.so; DSM_VDB_MODULE may name it)")
-  build_with_module("${SCENE}")
+  set(BUILD_ENV "DSM_VDB_MODULE=${SCENE}")
+  build(/dev/null "${SCENE}" -o "${MAP}")
   expect_refused("dsm-build: ERROR ")
   expect_contains(ERR "VDB file '${grid}': the OpenVDB module '${SCENE}' does not load: ")
+  unset(BUILD_ENV)
   build(/dev/null "${SCENE}" -o "${MAP}")
   expect_refused("dsm-build: ERROR ")
   expect_contains(ERR "VDB file '${grid}': ")

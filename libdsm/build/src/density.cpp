@@ -164,35 +164,37 @@ private:
 
 std::string vdbWhere(const VdbDensity& vdb) { return "VDB file '" + detail::clip(vdb.file, detail::kMaxQuotedPath) + "'"; }
 
-// A grid read by the module, released with it.
-using VdbGridPtr = std::shared_ptr<const DsmVdbGrid>;
+// A grid read by the module, with the module that released it.
+struct VdbGrid {
+    const DsmVdbModule* module;
+    std::unique_ptr<DsmVdbGrid, void (*)(DsmVdbGrid*)> grid;
+};
 
-VdbGridPtr loadFloatGrid(const VdbDensity& vdb) {
+VdbGrid loadFloatGrid(const VdbDensity& vdb) {
+    const std::string where = vdbWhere(vdb);
     std::error_code ec;
     if (!std::filesystem::is_regular_file(vdb.file, ec))
-        throw Error(ErrorCode::io, vdbWhere(vdb) + ": does not exist or is not a file", vdb.file);
-    const DsmVdbModule& module = vdbModule(vdb.file);
+        throw Error(ErrorCode::io, where + ": does not exist or is not a file", vdb.file);
+    const DsmVdbModule& module = vdbModule(where, vdb.file);
     int code = 0;
     char message[1024];
     DsmVdbGrid* grid = module.readGrid(vdb.file.c_str(), vdb.grid.c_str(), &code, message, sizeof message);
-    if (!grid) throw Error(static_cast<ErrorCode>(code), vdbWhere(vdb) + ": " + message, vdb.file);
-    return VdbGridPtr(grid, module.release);
+    if (!grid) throw Error(static_cast<ErrorCode>(code), where + ": " + message, vdb.file);
+    return {&module, {grid, module.release}};
 }
 
 class VdbField final : public BoxedField {
 public:
-    VdbField(const Volume& v, const VdbDensity& vdb, VdbGridPtr grid)
-        : BoxedField(v), module_(vdbModule(vdb.file)), grid_(std::move(grid)) {}
+    VdbField(const Volume& v, VdbGrid grid) : BoxedField(v), grid_(std::move(grid)) {}
 
     double density(const Vec3& p) const override {
         if (!inside(p)) return 0.0;
-        const float value = module_.sample(grid_.get(), p.data());
+        const float value = grid_.module->sample(grid_.grid.get(), p.data());
         return std::isfinite(value) && value > 0.0f ? static_cast<double>(value) : 0.0;
     }
 
 private:
-    const DsmVdbModule& module_;
-    VdbGridPtr grid_;
+    VdbGrid grid_;
 };
 #else
 [[noreturn]] void noOpenVdb(const VdbDensity& vdb) {
@@ -216,7 +218,7 @@ std::unique_ptr<DensityField> makeDensityField(const Volume& volume) {
         return std::make_unique<NoiseCloudField>(volume, *n);
     const auto& vdb = std::get<VdbDensity>(volume.density);
 #if DSM_WITH_OPENVDB
-    return std::make_unique<VdbField>(volume, vdb, loadFloatGrid(vdb));
+    return std::make_unique<VdbField>(volume, loadFloatGrid(vdb));
 #else
     noOpenVdb(vdb);
 #endif
@@ -228,8 +230,8 @@ void vdbBounds(const VdbDensity& vdb, Vec3& boundsMin, Vec3& boundsMax) {
     (void)boundsMax;
     noOpenVdb(vdb);
 #else
-    const VdbGridPtr grid = loadFloatGrid(vdb);
-    const int found = vdbModule(vdb.file).activeBounds(grid.get(), boundsMin.data(), boundsMax.data());
+    const VdbGrid grid = loadFloatGrid(vdb);
+    const int found = grid.module->activeBounds(grid.grid.get(), boundsMin.data(), boundsMax.data());
     if (found < 0)
         throw Error(ErrorCode::limit, vdbWhere(vdb) + ": out of memory finding the grid's active voxels", vdb.file);
     if (found == 0)

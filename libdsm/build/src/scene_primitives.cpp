@@ -20,7 +20,7 @@ double linearScale(const Affine& m) { return std::cbrt(std::abs(determinant3(m))
 ScenePrimitives::ScenePrimitives(const Scene& scene) {
     // Room for every primitive first: filling the arrays as they grew copied
     // the hair ball's 120,000 segments over and over (4-5 ms before a build
-    // could start).
+    // could start). Curves have fewer segments than points.
     std::size_t triangles = 0, spheres = 0, quads = 0, segments = 0;
     for (const SceneObject& object : scene.objects)
         std::visit(
@@ -29,14 +29,7 @@ ScenePrimitives::ScenePrimitives(const Scene& scene) {
                 if constexpr (std::is_same_v<G, TriangleMesh>) triangles += g.triangles.size();
                 if constexpr (std::is_same_v<G, dsm::Sphere>) ++spheres;
                 if constexpr (std::is_same_v<G, dsm::Quad>) ++quads;
-                if constexpr (std::is_same_v<G, Curves>) {
-                    std::size_t first = 0;  // curves beyond the points are refused below
-                    for (std::uint32_t n : g.pointsPerCurve) {
-                        if (first + n > g.points.size()) break;
-                        segments += n > 0 ? n - 1 : 0;
-                        first += n;
-                    }
-                }
+                if constexpr (std::is_same_v<G, Curves>) segments += g.points.size();
             },
             object.geometry);
     triangles_.reserve(triangles);

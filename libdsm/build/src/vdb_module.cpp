@@ -39,30 +39,21 @@ DsmVdbGrid* readGrid(const char* path, const char* gridName, int* errorCode, cha
     try {
         static std::once_flag once;
         std::call_once(once, [] { openvdb::initialize(); });
-        openvdb::GridBase::Ptr base;
-        try {
-            openvdb::io::File file(path);
-            file.open(/*delayLoad=*/false);
-            if (!file.hasGrid(gridName)) {
-                std::string names;
-                for (auto it = file.beginName(); it != file.endName(); ++it)
-                    names += (names.empty() ? "'" : ", '") + clip(*it) + "'";
-                file.close();
-                report(ErrorCode::scene,
-                       "has no grid '" + clip(gridName) + "' (grids: " +
-                           clip(names.empty() ? "none" : names, dsm::detail::kMaxQuotedPath) + ")",
-                       errorCode, message, messageSize);
-                return nullptr;
-            }
-            base = file.readGrid(gridName);
+        openvdb::io::File file(path);
+        file.open(/*delayLoad=*/false);
+        if (!file.hasGrid(gridName)) {
+            std::string names;
+            for (auto it = file.beginName(); it != file.endName(); ++it)
+                names += (names.empty() ? "'" : ", '") + clip(*it) + "'";
             file.close();
-        } catch (const openvdb::IoError& e) {
-            report(ErrorCode::io, clip(e.what()), errorCode, message, messageSize);
-            return nullptr;
-        } catch (const openvdb::Exception& e) {
-            report(ErrorCode::format, clip(e.what()), errorCode, message, messageSize);
+            report(ErrorCode::scene,
+                   "has no grid '" + clip(gridName) + "' (grids: " +
+                       clip(names.empty() ? "none" : names, dsm::detail::kMaxQuotedPath) + ")",
+                   errorCode, message, messageSize);
             return nullptr;
         }
+        const openvdb::GridBase::Ptr base = file.readGrid(gridName);
+        file.close();
         openvdb::FloatGrid::Ptr grid = openvdb::gridPtrCast<openvdb::FloatGrid>(base);
         if (!grid) {
             report(ErrorCode::scene,
@@ -71,6 +62,10 @@ DsmVdbGrid* readGrid(const char* path, const char* gridName, int* errorCode, cha
             return nullptr;
         }
         return new DsmVdbGrid{std::move(grid)};
+    } catch (const openvdb::IoError& e) {
+        report(ErrorCode::io, clip(e.what()), errorCode, message, messageSize);
+    } catch (const openvdb::Exception& e) {
+        report(ErrorCode::format, clip(e.what()), errorCode, message, messageSize);
     } catch (const std::bad_alloc&) {
         report(ErrorCode::limit, "out of memory reading the grid", errorCode, message, messageSize);
     } catch (const std::exception& e) {

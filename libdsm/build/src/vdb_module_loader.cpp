@@ -21,7 +21,7 @@ std::vector<fs::path> moduleCandidates() {
     if (const char* named = std::getenv("DSM_VDB_MODULE"); named && *named) return {fs::path(named)};
     std::vector<fs::path> homes;  // directories of the code running now
     Dl_info info{};
-    if (dladdr(reinterpret_cast<const void*>(&vdbModule), &info) != 0 && info.dli_fname &&
+    if (dladdr(reinterpret_cast<const void*>(&moduleCandidates), &info) != 0 && info.dli_fname &&
         fs::path(info.dli_fname).is_absolute())
         homes.push_back(fs::path(info.dli_fname).parent_path());
     std::error_code ec;
@@ -74,13 +74,10 @@ LoadedModule load() {
 
 }  // namespace
 
-const DsmVdbModule& vdbModule(const std::string& file) {
+const DsmVdbModule& vdbModule(const std::string& where, const std::string& file) {
     static const LoadedModule loaded = load();  // once, thread-safe
     if (!loaded.module)
-        throw Error(ErrorCode::unsupported,
-                    "VDB file '" + detail::clip(file, detail::kMaxQuotedPath) + "': " +
-                        detail::clip(loaded.failure, detail::kMaxQuotedPath),
-                    file);
+        throw Error(ErrorCode::unsupported, where + ": " + detail::clip(loaded.failure, detail::kMaxQuotedPath), file);
     return *loaded.module;
 }
 

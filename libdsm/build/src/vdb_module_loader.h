@@ -13,8 +13,9 @@ DSM_NAMESPACE_BEGIN
 /// found first: the file DSM_VDB_MODULE names when that variable is set;
 /// else beside the library or program holding this code, in `dsm/` and in
 /// `../<libdir>/dsm/` (the build tree's layout and an installed one's);
-/// else the directory it was installed to. Throws dsm::Error (unsupported)
-/// naming `file` when no module loads, and the same on every later call.
-const DsmVdbModule& vdbModule(const std::string& file);
+/// else the directory it was installed to. When no module loads, throws
+/// dsm::Error (unsupported) for `file`, its message starting with `where`
+/// (the caller's name for the file), and the same on every later call.
+const DsmVdbModule& vdbModule(const std::string& where, const std::string& file);
 
 DSM_NAMESPACE_END
