@@ -21,6 +21,9 @@ constexpr double kInf = Bounds3::kInf;
 // whose ray crosses the primitive; the exact test decides.
 constexpr double kRasterSlack = 1e-6;
 
+// How many bucket entries ahead tileHits() asks for a primitive's data.
+constexpr std::size_t kPrefetchAhead = 8;
+
 // The tiles [first, last] whose samples, `reach` pixels beyond each tile,
 // can lie in [lo, hi] along one axis of `tiles` tiles of `size` pixels.
 bool tileRange(double lo, double hi, std::uint32_t size, std::uint32_t reach, std::uint32_t tiles,
@@ -272,7 +275,21 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         frame_.screen(samples[i].x, samples[i].y, sxs[i], sys[i]);
     }
     const std::vector<Primitive>& primitives = surfaces_.all();
-    for (std::size_t e = bucketStart_[tile]; e < bucketStart_[tile + 1]; ++e) {
+    const std::size_t end = bucketStart_[tile + 1];
+    for (std::size_t e = bucketStart_[tile]; e < end; ++e) {
+        // A bucket's primitives lie scattered over the scene's arrays: ask
+        // for the data of those a few entries on before they are needed.
+        if (e + kPrefetchAhead < end) {
+            const std::uint32_t ahead = bucketPrimitives_[e + kPrefetchAhead];
+            __builtin_prefetch(&raster_[ahead]);
+            __builtin_prefetch(&footprints_[ahead]);
+            __builtin_prefetch(reinterpret_cast<const char*>(&footprints_[ahead]) + sizeof(SegmentFootprint) - 1);
+            __builtin_prefetch(&primitives[ahead]);
+        }
+        if (e + kPrefetchAhead / 2 < end) {
+            const Primitive& near = primitives[bucketPrimitives_[e + kPrefetchAhead / 2]];
+            if (near.kind == PrimitiveKind::Segment) surfaces_.prefetchSegment(near);
+        }
         const std::uint32_t index = bucketPrimitives_[e];
         const RasterBounds& b = raster_[index];
         const Primitive& primitive = primitives[index];

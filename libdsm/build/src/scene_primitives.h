@@ -88,6 +88,13 @@ public:
     /// The hair segment `p` is (p.kind == PrimitiveKind::Segment).
     const Segment& segment(const Primitive& p) const { return segments_[p.index]; }
 
+    /// Asks the processor for hair segment `p`'s data ahead of its use.
+    void prefetchSegment(const Primitive& p) const {
+        const char* at = reinterpret_cast<const char*>(&segments_[p.index]);
+        __builtin_prefetch(at);
+        __builtin_prefetch(at + sizeof(Segment) - 1);
+    }
+
     /// How far an object moves over the shutter (its linear motion), per object index.
     const Vec3& motion(std::uint32_t object) const { return motion_[object]; }
 
