@@ -182,6 +182,8 @@ void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
     const dsm::detail::LightRayFrame frame = dsm::detail::lightRayFrame(camera, size, size);
     constexpr std::uint32_t kTile = 16;
     const dsm::ScanlineHider hider(surfaces, camera, size, size, kTile, 0);
+    std::vector<dsm::Rgb> opacity;
+    for (const dsm::SceneObject& object : scene.objects) opacity.push_back(object.opacity);
     std::mt19937_64 rng(3);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const dsm::Vec3 toLight{camera.worldToLight[8], camera.worldToLight[9], camera.worldToLight[10]};
@@ -216,10 +218,12 @@ void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
         ++edgeCrossings;
         dsm::ScanlineHider::TileHits hits;
         hider.tileHits(px / kTile, py / kTile, {px, py, px + 1, py + 1}, 1, std::span(&sample, 1), camera.nearPlane,
-                       hits);
+                       opacity, hits);
         const auto crossings = hits.of(0);
-        const bool present = std::any_of(crossings.begin(), crossings.end(), [&](const dsm::RaySurfaceHit& h) {
-            return h.t == exact[0].t && h.object == exact[0].object;
+        const dsm::Rgb& expectedOpacity = opacity[exact[0].object];
+        const bool present = std::any_of(crossings.begin(), crossings.end(), [&](const dsm::SurfaceHit& h) {
+            return h.z == static_cast<float>(exact[0].t) && h.opacity[0] == expectedOpacity[0] &&
+                   h.opacity[1] == expectedOpacity[1] && h.opacity[2] == expectedOpacity[2];
         });
         ASSERT_TRUE(present) << "sample " << r << " at " << rx << ", " << ry;
     }

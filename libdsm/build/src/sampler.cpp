@@ -281,6 +281,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
 
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads.value_or(0))));  // 0: all cores
     std::optional<ScanlineHider> hider;
+    std::vector<Rgb> objectOpacity;
+    for (const SceneObject& object : scene.objects) objectOpacity.push_back(object.opacity);
     if (scanline)  // bucketing the primitives uses the build's threads
         arena.execute([&] { hider.emplace(caster.surfaces(), camera, W, H, w.tileSize, static_cast<std::uint32_t>(reach)); });
 
@@ -353,9 +355,13 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 const SampleData& s = samples[i];
                 ws.points[i] = HiderSample{s.x, s.y, s.time};
             }
-            hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, ws.hits);
+            hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, objectOpacity, ws.hits);
+            // The hider's hits, grouped by sample, become the tile's (its
+            // vectors trade storage, both kept).
+            ws.surfaceHits.swap(ws.hits.hits);
             for (std::size_t i = 0; i < count; ++i) {
-                addSurfaceHits(ws.hits.of(i), samples[i], ws);
+                samples[i].firstHit = ws.hits.start[i];
+                samples[i].hitCount = ws.hits.start[i + 1] - ws.hits.start[i];
                 addVolumeSamples(samples[i], ws.volume);
             }
         } else {

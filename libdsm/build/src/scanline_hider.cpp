@@ -250,7 +250,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
 
 void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels,
                              std::uint32_t spp, std::span<const HiderSample> samples, double tMin,
-                             TileHits& out) const {
+                             std::span<const Rgb> opacity, TileHits& out) const {
     out.found.clear();
     out.foundSample.clear();
     out.hits.clear();
@@ -331,7 +331,11 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     for (std::size_t i = 0; i < samples.size(); ++i) out.start[i + 1] += out.start[i];
     out.hits.resize(out.found.size());
     std::vector<std::size_t>& next = out.start;  // each sample's next slot, then moved back below
-    for (std::size_t f = 0; f < out.found.size(); ++f) out.hits[next[out.foundSample[f]]++] = out.found[f];
+    for (std::size_t f = 0; f < out.found.size(); ++f) {
+        const RaySurfaceHit& h = out.found[f];
+        const Rgb& o = opacity[h.object];
+        out.hits[next[out.foundSample[f]]++] = SurfaceHit{static_cast<float>(h.t), {o[0], o[1], o[2]}};
+    }
     for (std::size_t i = samples.size(); i > 0; --i) next[i] = next[i - 1];
     next[0] = 0;
 }

@@ -15,6 +15,8 @@
 #include <vector>
 
 #include "dsm/map_info.h"
+#include "dsm/scene.h"
+#include "dsm/transmittance.h"
 #include "light_rays.h"
 #include "scene_primitives.h"
 
@@ -42,13 +44,14 @@ public:
                   std::uint32_t height, std::uint32_t tileSize, std::uint32_t reach);
 
     /// The crossings of a tile's samples, each sample's in one run: sample
-    /// i's are hits[start[i], start[i + 1]), in the order of the primitives.
-    /// A caller reusing one from tile to tile keeps its storage.
+    /// i's are hits[start[i], start[i + 1]), in the order of the primitives,
+    /// each as the sampler takes it (its depth as a float and its object's
+    /// opacity). A caller reusing one from tile to tile keeps its storage.
     struct TileHits {
         std::vector<std::size_t> start;
-        std::vector<RaySurfaceHit> hits;
-        std::span<const RaySurfaceHit> of(std::size_t i) const {
-            return std::span<const RaySurfaceHit>(hits).subspan(start[i], start[i + 1] - start[i]);
+        std::vector<SurfaceHit> hits;
+        std::span<const SurfaceHit> of(std::size_t i) const {
+            return std::span<const SurfaceHit>(hits).subspan(start[i], start[i + 1] - start[i]);
         }
         // Found in the order of the primitives, with their samples, then
         // grouped by sample into `hits`.
@@ -59,9 +62,11 @@ public:
     /// The crossings with t > tMin of the samples of tile (tx, ty). The tile's
     /// samples cover the sample pixels [x0, x1) x [y0, y1) (`pixels`), spp per
     /// pixel: pixel (x, y)'s k-th sample is samples[((y - y0) * (x1 - x0) +
-    /// (x - x0)) * spp + k]. `out` receives them all, replacing what it held.
+    /// (x - x0)) * spp + k]. `opacity` holds each object's opacity, by object
+    /// index. `out` receives them all, replacing what it held.
     void tileHits(std::uint32_t tx, std::uint32_t ty, const std::array<std::uint32_t, 4>& pixels, std::uint32_t spp,
-                  std::span<const HiderSample> samples, double tMin, TileHits& out) const;
+                  std::span<const HiderSample> samples, double tMin, std::span<const Rgb> opacity,
+                  TileHits& out) const;
 
     /// Primitive entries over all buckets (a primitive counts once per tile).
     std::size_t bucketEntries() const { return bucketPrimitives_.size(); }
