@@ -76,6 +76,55 @@ struct RasterStretch {
     }
 };
 
+// LightCamera's worldToLightSpace() and lightToRaster() for the ten
+// projections of each primitive's bucketing: inline (the same sums in the
+// same order for light space), and with one division a point where
+// lightToRaster() has four. Raster positions move by a few units in the last
+// place, far inside the widening of raster bounds (kRasterSlack) and of
+// footprints (1 %), and the exact crossing decides.
+struct RasterProjection {
+    std::array<double, 12> toLight;
+    double w0, w3, scaleX, scaleY;
+    bool perspective;
+
+    RasterProjection(const LightCamera& camera, std::uint32_t width, std::uint32_t height) {
+        for (std::size_t k = 0; k < toLight.size(); ++k) toLight[k] = camera.worldToLight[k];
+        const auto& w = camera.screenWindow;
+        w0 = w[0];
+        w3 = w[3];
+        scaleX = width / (w[1] - w[0]);
+        scaleY = height / (w[3] - w[2]);
+        perspective = camera.projection == Projection::Perspective;
+    }
+
+    std::array<double, 3> lightSpace(const Vec3& p) const {
+        const auto& m = toLight;
+        return {m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3], m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
+                m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]};
+    }
+    // Screen position (x/z, y/z under a perspective light); false behind it.
+    bool screen(const std::array<double, 3>& light, double& sx, double& sy) const {
+        sx = light[0];
+        sy = light[1];
+        if (perspective) {
+            if (!(light[2] > 0.0)) return false;
+            const double inverse = 1.0 / light[2];
+            sx *= inverse;
+            sy *= inverse;
+        }
+        return true;
+    }
+    bool raster(double sx, double sy, double& rx, double& ry) const {
+        rx = (sx - w0) * scaleX;
+        ry = (w3 - sy) * scaleY;
+        return std::isfinite(rx) && std::isfinite(ry);
+    }
+    bool operator()(const Vec3& world, double& rx, double& ry) const {
+        double sx, sy;
+        return screen(lightSpace(world), sx, sy) && raster(sx, sy, rx, ry);
+    }
+};
+
 }  // namespace
 
 // The samples among n <= 64 (raster positions xs, ys) that a primitive's
@@ -161,6 +210,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
     };
     std::vector<TileRect> rects(primitives.size());
     const RasterStretch cameraStretch(camera, width, height);
+    const RasterProjection project(camera, width, height);
     // Each primitive's raster bounds, footprint and tile rectangle, in
     // parallel (each writes only its own entries, so any split gives the same).
     auto place = [&](std::size_t i) {
@@ -171,17 +221,18 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         for (int corner = 0; corner < 8; ++corner) {
             const Vec3 world{(corner & 1) ? b.hi[0] : b.lo[0], (corner & 2) ? b.hi[1] : b.lo[1],
                              (corner & 4) ? b.hi[2] : b.lo[2]};
-            const std::array<double, 3> light = camera.worldToLightSpace(world);
+            const std::array<double, 3> light = project.lightSpace(world);
             if (light[2] > camera.nearPlane) inFront = true;
             zMin = std::min(zMin, light[2]);
-            const double depth = camera.projection == Projection::Perspective ? light[2] : 1.0;
-            uMax = std::max(uMax, std::abs(light[0] / depth));
-            vMax = std::max(vMax, std::abs(light[1] / depth));
-            double rx, ry, z;
-            if (!camera.lightToRaster(light, static_cast<int>(width), static_cast<int>(height), rx, ry, z)) {
+            // A corner behind the light leaves no footprint: uMax and vMax
+            // only count those in front.
+            double sx, sy, rx, ry;
+            if (!project.screen(light, sx, sy) || !project.raster(sx, sy, rx, ry)) {
                 behindLight = true;
                 continue;
             }
+            uMax = std::max(uMax, std::abs(sx));
+            vMax = std::max(vMax, std::abs(sy));
             r.x0 = std::min(r.x0, rx);
             r.y0 = std::min(r.y0, ry);
             r.x1 = std::max(r.x1, rx);
@@ -202,10 +253,9 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         const Primitive& p = primitives[i];
         if (p.kind == PrimitiveKind::Segment && !behindLight && zMin > 0.0 && surfaces.motion(p.object) == Vec3{}) {
             const ScenePrimitives::Segment& s = surfaces.segment(p);
-            double x0, y0, x1, y1, z;
+            double x0, y0, x1, y1;
             const double stretch = cameraStretch.at(zMin, uMax, vMax);
-            if (camera.lightToRaster(camera.worldToLightSpace(s.p0), int(width), int(height), x0, y0, z) &&
-                camera.lightToRaster(camera.worldToLightSpace(s.p1), int(width), int(height), x1, y1, z) &&
+            if (project(s.p0, x0, y0) && project(s.p1, x1, y1) &&
                 std::isfinite(stretch)) {
                 SegmentFootprint& f = footprints_[i];
                 f.x0 = x0;
