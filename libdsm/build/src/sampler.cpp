@@ -321,10 +321,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     auto addSurfaceHits = [&](std::span<const RaySurfaceHit> hits, SampleData& s, TileWorkspace& ws) {
         s.firstHit = ws.surfaceHits.size();
         s.hitCount = hits.size();
-        for (const RaySurfaceHit& h : hits) {
-            const Rgb& opacity = scene.objects[h.object].opacity;
-            ws.surfaceHits.push_back({static_cast<float>(h.t), {opacity[0], opacity[1], opacity[2]}});
-        }
+        for (const RaySurfaceHit& h : hits) ws.surfaceHits.push_back(samplerHit(h, objectOpacity));
     };
     auto addVolumeSamples = [&](SampleData& s, std::vector<RayVolumeSample>& volume) {
         if (!caster.hasVolumes()) return;

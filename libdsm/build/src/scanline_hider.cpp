@@ -337,8 +337,8 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
             __builtin_prefetch(&primitives[ahead]);
         }
         if (e + kPrefetchAhead / 2 < end) {
-            const Primitive& near = primitives[bucketPrimitives_[e + kPrefetchAhead / 2]];
-            if (near.kind == PrimitiveKind::Segment) surfaces_.prefetchSegment(near);
+            const Primitive& soon = primitives[bucketPrimitives_[e + kPrefetchAhead / 2]];
+            if (soon.kind == PrimitiveKind::Segment) surfaces_.prefetchSegment(soon);
         }
         const std::uint32_t index = bucketPrimitives_[e];
         const RasterBounds& b = raster_[index];
@@ -381,11 +381,8 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     for (std::size_t i = 0; i < samples.size(); ++i) out.start[i + 1] += out.start[i];
     out.hits.resize(out.found.size());
     std::vector<std::size_t>& next = out.start;  // each sample's next slot, then moved back below
-    for (std::size_t f = 0; f < out.found.size(); ++f) {
-        const RaySurfaceHit& h = out.found[f];
-        const Rgb& o = opacity[h.object];
-        out.hits[next[out.foundSample[f]]++] = SurfaceHit{static_cast<float>(h.t), {o[0], o[1], o[2]}};
-    }
+    for (std::size_t f = 0; f < out.found.size(); ++f)
+        out.hits[next[out.foundSample[f]]++] = samplerHit(out.found[f], opacity);
     for (std::size_t i = samples.size(); i > 0; --i) next[i] = next[i - 1];
     next[0] = 0;
 }

@@ -9,10 +9,12 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <span>
 #include <vector>
 
 #include "affine.h"
 #include "dsm/scene.h"
+#include "dsm/transmittance.h"
 #include "tested_internal.h"
 
 DSM_NAMESPACE_BEGIN
@@ -48,6 +50,13 @@ struct RaySurfaceHit {
     double t;
     std::uint32_t object;
 };
+
+/// The crossing as the sampler keeps it: its depth as a float and its
+/// object's opacity (`opacity` holds each object's, by object index).
+inline SurfaceHit samplerHit(const RaySurfaceHit& h, std::span<const Rgb> opacity) {
+    const Rgb& o = opacity[h.object];
+    return SurfaceHit{static_cast<float>(h.t), {o[0], o[1], o[2]}};
+}
 
 enum class PrimitiveKind : std::uint8_t { Triangle, Sphere, Quad, Segment };
 
