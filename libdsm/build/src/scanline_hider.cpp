@@ -76,19 +76,16 @@ struct RasterStretch {
     }
 };
 
-// LightCamera's worldToLightSpace() and lightToRaster() for the ten
-// projections of each primitive's bucketing: inline (the same sums in the
-// same order for light space), and with one division a point where
-// lightToRaster() has four. Raster positions move by a few units in the last
-// place, far inside the widening of raster bounds (kRasterSlack) and of
-// footprints (1 %), and the exact crossing decides.
+// LightCamera::lightToRaster() for the ten projections of each primitive's
+// bucketing, with one division a point where it has four (the inverse depth,
+// which the footprint's bound uses too). Raster positions move by a few units
+// in the last place, far inside the widening of raster bounds (kRasterSlack)
+// and of footprints (1 %), and the exact crossing decides.
 struct RasterProjection {
-    std::array<double, 12> toLight;
     double w0, w3, scaleX, scaleY;
     bool perspective;
 
     RasterProjection(const LightCamera& camera, std::uint32_t width, std::uint32_t height) {
-        for (std::size_t k = 0; k < toLight.size(); ++k) toLight[k] = camera.worldToLight[k];
         const auto& w = camera.screenWindow;
         w0 = w[0];
         w3 = w[3];
@@ -97,11 +94,6 @@ struct RasterProjection {
         perspective = camera.projection == Projection::Perspective;
     }
 
-    std::array<double, 3> lightSpace(const Vec3& p) const {
-        const auto& m = toLight;
-        return {m[0] * p[0] + m[1] * p[1] + m[2] * p[2] + m[3], m[4] * p[0] + m[5] * p[1] + m[6] * p[2] + m[7],
-                m[8] * p[0] + m[9] * p[1] + m[10] * p[2] + m[11]};
-    }
     // Screen position (x/z, y/z under a perspective light); false behind it.
     bool screen(const std::array<double, 3>& light, double& sx, double& sy) const {
         sx = light[0];
@@ -119,9 +111,9 @@ struct RasterProjection {
         ry = (w3 - sy) * scaleY;
         return std::isfinite(rx) && std::isfinite(ry);
     }
-    bool operator()(const Vec3& world, double& rx, double& ry) const {
+    bool operator()(const std::array<double, 3>& light, double& rx, double& ry) const {
         double sx, sy;
-        return screen(lightSpace(world), sx, sy) && raster(sx, sy, rx, ry);
+        return screen(light, sx, sy) && raster(sx, sy, rx, ry);
     }
 };
 
@@ -221,7 +213,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         for (int corner = 0; corner < 8; ++corner) {
             const Vec3 world{(corner & 1) ? b.hi[0] : b.lo[0], (corner & 2) ? b.hi[1] : b.lo[1],
                              (corner & 4) ? b.hi[2] : b.lo[2]};
-            const std::array<double, 3> light = project.lightSpace(world);
+            const std::array<double, 3> light = camera.worldToLightSpace(world);
             if (light[2] > camera.nearPlane) inFront = true;
             zMin = std::min(zMin, light[2]);
             // A corner behind the light leaves no footprint: uMax and vMax
@@ -255,7 +247,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
             const ScenePrimitives::Segment& s = surfaces.segment(p);
             double x0, y0, x1, y1;
             const double stretch = cameraStretch.at(zMin, uMax, vMax);
-            if (project(s.p0, x0, y0) && project(s.p1, x1, y1) &&
+            if (project(camera.worldToLightSpace(s.p0), x0, y0) && project(camera.worldToLightSpace(s.p1), x1, y1) &&
                 std::isfinite(stretch)) {
                 SegmentFootprint& f = footprints_[i];
                 f.x0 = x0;

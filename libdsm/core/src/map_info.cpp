@@ -8,17 +8,6 @@
 
 DSM_NAMESPACE_BEGIN
 
-std::array<double, 3> LightCamera::worldToLightSpace(const std::array<double, 3>& p) const {
-    const auto& m = worldToLight;
-    std::array<double, 3> out{};
-    for (int r = 0; r < 3; ++r)
-        out[static_cast<std::size_t>(r)] = m[static_cast<std::size_t>(4 * r)] * p[0] +
-                                           m[static_cast<std::size_t>(4 * r + 1)] * p[1] +
-                                           m[static_cast<std::size_t>(4 * r + 2)] * p[2] +
-                                           m[static_cast<std::size_t>(4 * r + 3)];
-    return out;
-}
-
 bool LightCamera::lightToRaster(const std::array<double, 3>& p, int width, int height, double& rx, double& ry,
                                 double& z) const {
     z = p[2];

@@ -316,10 +316,6 @@ struct Sweeper::Impl {
         return dispatch(inputs, channels, scan, sink);
     }
 
-    // The channel count as a constant lets the compiler unroll the
-    // per-channel loops; inputs that are all flat between their steps (rays
-    // of surface hits alone) skip the slope bookkeeping, whose terms would
-    // all be 0. The arithmetic on values is the same either way.
     // Whether some input slopes, and their steps in all.
     struct InputScan {
         bool sloped = false;
@@ -329,6 +325,10 @@ struct Sweeper::Impl {
             events += f.size();
         }
     };
+    // The channel count as a constant lets the compiler unroll the
+    // per-channel loops; inputs that are all flat between their steps (rays
+    // of surface hits alone) skip the slope bookkeeping, whose terms would
+    // all be 0. The arithmetic on values is the same either way.
     template <class Sink>
     std::optional<float> dispatch(Span<const SweepInput* const> inputs, int channels, const InputScan& scan,
                                   Sink& sink) {

@@ -38,8 +38,14 @@ struct DSM_API LightCamera {
     /// Depth of the near plane: nothing nearer was sampled.
     double nearPlane = 0.0;
 
-    /// World point to light space.
-    std::array<double, 3> worldToLightSpace(const std::array<double, 3>& world) const;
+    /// World point to light space. Inline: the sampler's bucketing projects
+    /// ten points a primitive.
+    std::array<double, 3> worldToLightSpace(const std::array<double, 3>& world) const {
+        const auto& m = worldToLight;
+        return {m[0] * world[0] + m[1] * world[1] + m[2] * world[2] + m[3],
+                m[4] * world[0] + m[5] * world[1] + m[6] * world[2] + m[7],
+                m[8] * world[0] + m[9] * world[1] + m[10] * world[2] + m[11]};
+    }
     /// Light-space point to raster (rx, ry) and depth z. For a perspective
     /// camera, points at z <= 0 have no raster position: returns false.
     bool lightToRaster(const std::array<double, 3>& light, int width, int height, double& rx, double& ry,
