@@ -237,6 +237,15 @@ TEST(ScanlineHider, FindsHairCrossingsAtTheRibbonsEdges) {
         SCOPED_TRACE("perspective");
         expectHiderFindsRibbonEdges(spot, 512);
     }
+    // A wide light looking 56 degrees past the ball, which then lies near
+    // its view's edge, where a step across a ribbon moves the projection most.
+    dsm::Scene wide = spot;
+    wide.light.fieldOfViewDegrees = 150.0;
+    wide.light.direction = {3.0, -3.0, -4.0};
+    {
+        SCOPED_TRACE("perspective, wide and off-axis");
+        expectHiderFindsRibbonEdges(wide, 512);
+    }
     dsm::Scene distant = dsm::parseScene(R"({
       "light": {"type": "distant", "position": [1.5, 5, 2], "direction": [-1.5, -4.4, -2], "up": [0, 0, -1],
                 "extent": 1.2, "resolution": [64, 64]},

@@ -39,40 +39,48 @@ bool tileRange(double lo, double hi, std::uint32_t size, std::uint32_t reach, st
 // still hair segment whose ray still passes the ribbon. A crossing point H lies
 // within the half-width r of an axis point Q, so both lie in the segment's box
 // (padded by its half-widths), where light depth z >= zMin and |x/z| <= uMax,
-// |y/z| <= vMax. Along the way from Q to H, with light-space rows of norms
-// n = (nx, ny, nz), d(x/z) = (dx - (x/z) dz) / z moves at most
-// (nx + uMax nz) |dH| / zMin (perspective; nx |dH| orthographic), likewise y.
-// The sample is H's projection and Q's projection lies on the projected axis,
-// so the sample's distance from that axis is at most r times the raster
-// stretch. The bound is widened by 1 % so rounding never rejects a crossing
-// the exact test would find; the exact test still decides.
-// The camera's part of that bound, the same for every primitive: raster units
-// per unit of x/z and y/z (or of x, y), and the light-space rows' norms.
+// |y/z| <= vMax. Along the way from Q to H a step dp moves the screen position
+// (x/z, y/z) by (1/z) A M dp (perspective; M dp orthographic), with M the
+// world-to-light rotation and scale and A = [1 0 -u; 0 1 -v] at u = x/z,
+// v = y/z, whose largest singular value is sqrt(1 + u^2 + v^2). So raster
+// positions move at most max(ax, ay) sqrt(1 + uMax^2 + vMax^2) |M| / zMin
+// times |dp| (ax, ay: raster units per screen unit; |M| its largest singular
+// value, bounded from above). The sample is H's projection and Q's projection
+// lies on the projected axis, so the sample's distance from that axis is at
+// most r times that stretch. The bound is widened by 1 % so rounding never
+// rejects a crossing the exact test would find; the exact test still decides.
+// The camera's part of that bound, the same for every primitive.
 struct RasterStretch {
-    double ax, ay, nx, ny, nz;
+    double scale;  // max(ax, ay) |M|
     bool perspective;
 
     RasterStretch(const LightCamera& camera, std::uint32_t width, std::uint32_t height) {
-        const auto& m = camera.worldToLight;
-        const auto rowNorm = [&](int r) {
-            return std::sqrt(m[4 * r] * m[4 * r] + m[4 * r + 1] * m[4 * r + 1] + m[4 * r + 2] * m[4 * r + 2]);
-        };
         const auto& w = camera.screenWindow;
-        ax = width / std::abs(w[1] - w[0]);
-        ay = height / std::abs(w[3] - w[2]);
-        nx = rowNorm(0);
-        ny = rowNorm(1);
-        nz = rowNorm(2);
+        const double ax = width / std::abs(w[1] - w[0]), ay = height / std::abs(w[3] - w[2]);
+        scale = std::max(ax, ay) * largestSingularValueBound(camera.worldToLight);
         perspective = camera.projection == Projection::Perspective;
     }
 
     double at(double zMin, double uMax, double vMax) const {
-        double sx = ax * nx, sy = ay * ny;
-        if (perspective) {
-            sx = ax * (nx + uMax * nz) / zMin;
-            sy = ay * (ny + vMax * nz) / zMin;
+        const double s = perspective ? scale * std::sqrt(1.0 + uMax * uMax + vMax * vMax) / zMin : scale;
+        return 1.01 * s;
+    }
+
+    // An upper bound on the largest singular value of m's 3 x 3 linear part:
+    // the square root of the largest absolute row sum of M^T M, which bounds
+    // its largest eigenvalue (Gershgorin). Exact (1) for a rotation.
+    static double largestSingularValueBound(const std::array<double, 16>& m) {
+        double largest = 0.0;
+        for (int i = 0; i < 3; ++i) {
+            double row = 0.0;
+            for (int j = 0; j < 3; ++j) {
+                double mtm = 0.0;  // (M^T M)_ij: columns i and j of M
+                for (int k = 0; k < 3; ++k) mtm += m[4 * k + i] * m[4 * k + j];
+                row += std::abs(mtm);
+            }
+            largest = std::max(largest, row);
         }
-        return 1.01 * std::sqrt(sx * sx + sy * sy);
+        return std::sqrt(largest);
     }
 };
 
