@@ -169,14 +169,16 @@ std::uint64_t ScanlineHider::rasterCandidates(const double* xs, const double* ys
 // Narrows [x0, x1] to the pixels of row y (samples with y <= sample y < y + 1)
 // that a footprint reaches: those within `radius` of the part of the axis
 // whose y lies within `radius` of the row. False when it misses the row.
+// Multiplying by the stored 1 / dy moves the axis's ends by a few units in
+// the last place, far inside the slack.
 bool ScanlineHider::footprintRow(const SegmentFootprint& f, double radius, std::uint32_t y, std::uint32_t& x0,
                                  std::uint32_t& x1) {
     const double slack = 1e-9 * (1.0 + std::abs(f.x0) + std::abs(f.y0));
     const double lo = double(y) - radius - slack, hi = double(y) + 1.0 + radius + slack;
     double s0 = 0.0, s1 = 1.0;
     if (f.dy != 0.0) {
-        s0 = (lo - f.y0) / f.dy;
-        s1 = (hi - f.y0) / f.dy;
+        s0 = (lo - f.y0) * f.invDy;
+        s1 = (hi - f.y0) * f.invDy;
         if (s0 > s1) std::swap(s0, s1);
         s0 = std::max(s0, 0.0);
         s1 = std::min(s1, 1.0);
@@ -264,6 +266,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
                 f.dy = y1 - y0;
                 const double length2 = f.dx * f.dx + f.dy * f.dy;
                 f.invLength2 = length2 > 0.0 ? 1.0 / length2 : 0.0;
+                f.invDy = f.dy != 0.0 ? 1.0 / f.dy : 0.0;
                 const double radius = std::max(s.r0, s.r1) * stretch + 1e-9 * (1.0 + std::abs(x0) + std::abs(y0));
                 f.radius2 = radius * radius;
             }

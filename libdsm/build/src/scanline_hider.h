@@ -81,6 +81,7 @@ private:
     /// exact test decides alone).
     struct SegmentFootprint {
         double x0 = 0.0, y0 = 0.0, dx = 0.0, dy = 0.0, invLength2 = 0.0, radius2 = -1.0;
+        double invDy = 0.0;  // 1 / dy (0 when dy is), for footprintRow()
     };
 
     static bool footprintRow(const SegmentFootprint& f, double radius, std::uint32_t y, std::uint32_t& x0,
