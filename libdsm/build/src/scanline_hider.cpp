@@ -306,9 +306,11 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
                              std::span<const Rgb> opacity, TileHits& out) const {
     out.found.clear();
     out.foundSample.clear();
-    out.hits.clear();
     out.start.assign(samples.size() + 1, 0);
-    if (tx >= tilesX_ || ty >= tilesY_) return;
+    if (tx >= tilesX_ || ty >= tilesY_) {
+        out.hits.clear();
+        return;
+    }
     const std::size_t tile = std::size_t(ty) * tilesX_ + tx;
     const std::uint32_t sw = pixels[2] - pixels[0];
     // The samples' raster positions side by side, for rasterCandidates() (one
@@ -357,6 +359,10 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         const auto x0 = static_cast<std::uint32_t>(px0), x1 = static_cast<std::uint32_t>(px1);
         const auto y0 = static_cast<std::uint32_t>(py0), y1 = static_cast<std::uint32_t>(py1);
         const double radius = f.radius2 >= 0.0 ? std::sqrt(f.radius2) : 0.0;
+        // A still primitive is crossed alike at every time (moved by zero):
+        // its candidates' times are not read (an array apart, often not in
+        // the cache).
+        const bool still = surfaces_.motion(primitive.object) == Vec3{};
         for (std::uint32_t y = y0; y <= y1; ++y) {
             std::uint32_t rowX0 = x0, rowX1 = x1;
             if (f.radius2 >= 0.0 && !footprintRow(f, radius, y, rowX0, rowX1)) continue;
@@ -369,7 +375,8 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
                         const std::size_t k = group + static_cast<std::size_t>(std::countr_zero(pass));
                         Vec3 origin, direction;
                         frame_.rayAt(sxs[k], sys[k], origin, direction);
-                        surfaces_.intersect(primitive, origin, direction, samples[k].time, tMin, out.found);
+                        surfaces_.intersect(primitive, origin, direction, still ? 0.0 : samples[k].time, tMin,
+                                            out.found);
                         // A primitive yields at most two crossings: pushed, not resized
                         // (a call for a fill of 0, 1 or 2).
                         while (out.foundSample.size() < out.found.size())
@@ -382,6 +389,8 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     // Grouped by sample, each sample's in the order found (a counting sort).
     for (const std::uint32_t sample : out.foundSample) ++out.start[sample + 1];
     for (std::size_t i = 0; i < samples.size(); ++i) out.start[i + 1] += out.start[i];
+    // Every slot is written below: resizing from the size the vector had
+    // (not from empty) sets only the slots it gains.
     out.hits.resize(out.found.size());
     std::vector<std::size_t>& next = out.start;  // each sample's next slot, then moved back below
     for (std::size_t f = 0; f < out.found.size(); ++f)
