@@ -193,7 +193,7 @@ void SweepInput::assign(const VisibilityView& f) {
     size_ = channels_ == 1 ? assignWith<1>(f) : assignWith<kMaxChannels>(f);
 }
 
-void SweepInput::reserveDepths(std::size_t depths, int channels) {
+void SweepInput::reserveHeapDepths(std::size_t depths, int channels) {
     channels_ = channels;
     const std::size_t numbers = depths * 2 * static_cast<std::size_t>(channels);
     stepData_ = storageFor(depths, inlineSteps_, kInlineDepths, steps_, stepCapacity_);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <span>
 #include <vector>
 
 #include "dsm/error.h"
@@ -40,56 +41,77 @@ void checkVolume(std::span<const VolumeSample> volume) {
     }
 }
 
-bool blocksNothing(const SurfaceHit& h, int channels) {
-    for (int c = 0; c < channels; ++c)
-        if (h.opacity[static_cast<std::size_t>(c)] != 0.0f) return false;
-    return true;
-}
-
-// Sorts `items` by depth, equal depths in their given order (what
+// Sorts items[0, n) by depth, equal depths in their given order (what
 // std::stable_sort does, without the buffer it allocates on every call):
 // through a permutation sorted by (depth, index) and a scratch copy.
 // A ray's few hits (the common case) are sorted in place by insertion, which
 // moves an item only past deeper ones and so keeps equal depths in order too.
 template <class T>
-void sortByDepth(std::vector<T>& items, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
+void sortByDepth(T* items, std::size_t n, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
     constexpr std::size_t kInsertionLimit = 16;
-    if (items.size() <= kInsertionLimit) {
-        detail::insertionSort(items.data(), items.size(), [](const T& a, const T& b) { return a.z < b.z; });
+    const auto byDepth = [](const T& a, const T& b) { return a.z < b.z; };
+    if (n <= kInsertionLimit) {
+        detail::insertionSort(items, n, byDepth);
         return;
     }
-    if (std::is_sorted(items.begin(), items.end(), [](const T& a, const T& b) { return a.z < b.z; })) return;
-    order.resize(items.size());
-    for (std::uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    if (std::is_sorted(items, items + n, byDepth)) return;
+    order.resize(n);
+    for (std::uint32_t i = 0; i < n; ++i) order[i] = i;
     std::sort(order.begin(), order.end(), [&](std::uint32_t a, std::uint32_t b) {
         return items[a].z < items[b].z || (items[a].z == items[b].z && a < b);
     });
-    scratch.resize(items.size());
-    for (std::size_t i = 0; i < order.size(); ++i) scratch[i] = items[order[i]];
-    items.swap(scratch);
+    scratch.resize(n);
+    for (std::size_t i = 0; i < n; ++i) scratch[i] = items[order[i]];
+    std::copy(scratch.begin(), scratch.end(), items);
+}
+
+// Copies the hits beyond zStart that block some light (an opacity not 0 in
+// some of the NC channels) to kept[0, count) and returns count; `valid`
+// becomes false when some hit fails checkHits(). One pass without a branch
+// a hit: a sample's few hits from the sampler are valid, and checking them
+// one test at a time cost as much as the rest of their transmittance.
+template <std::size_t NC>
+std::size_t keepHits(std::span<const SurfaceHit> hits, float zStart, SurfaceHit* kept, bool& valid) {
+    std::size_t count = 0;
+    bool allValid = true;
+    for (const SurfaceHit& h : hits) {
+        bool blocks = false;
+        allValid &= std::isfinite(h.z) & (h.z >= 0.0f);
+        for (std::size_t c = 0; c < NC; ++c) {
+            const float o = h.opacity[c];
+            allValid &= (o >= 0.0f) & (o <= 1.0f);
+            blocks |= o != 0.0f;
+        }
+        kept[count] = h;
+        count += std::size_t((h.z > zStart) & blocks);
+    }
+    valid = allValid;
+    return count;
 }
 
 }  // namespace
 
 struct TransmittanceBuilder::Impl {
-    std::vector<SurfaceHit> hits, hitScratch;
+    std::vector<SurfaceHit> hits, hitScratch;  // hits grown, never shrunk: sortedHits() says how many
     std::vector<VolumeSample> volume, volumeScratch;
     std::vector<std::uint32_t> order;
     std::vector<double> volumeTau;
     VisibilityFunction function;  // a ray with volume, on its way to a SweepInput
 
-    // Checks the ray and keeps in `hits` those beyond zStart that block some
-    // light, sorted by depth (equal depths in the ray's order).
-    void sortedHits(const SampleRay& ray, int channels, float zStart) {
+    // Checks the ray and returns those of its hits beyond zStart that block
+    // some light, sorted by depth (equal depths in the ray's order), kept in
+    // `hits`.
+    std::span<const SurfaceHit> sortedHits(const SampleRay& ray, int channels, float zStart) {
         if (channels != 1 && channels != kMaxChannels)
             throw Error(ErrorCode::argument, detail::concat("transmittance: channel count ", channels, " is not 1 or 3"));
-        checkHits(ray.hits, channels);
+        if (hits.size() < ray.hits.size()) hits.resize(ray.hits.size());
+        bool valid = true;
+        const std::size_t count = channels == 1 ? keepHits<1>(ray.hits, zStart, hits.data(), valid)
+                                                : keepHits<kMaxChannels>(ray.hits, zStart, hits.data(), valid);
+        if (!valid) checkHits(ray.hits, channels);  // throws, naming the first hit at fault
         checkVolume(ray.volume);
-
-        hits.clear();
-        for (const SurfaceHit& h : ray.hits)
-            if (h.z > zStart && !blocksNothing(h, channels)) hits.push_back(h);
-        sortByDepth(hits, order, hitScratch);
+        sortByDepth(hits.data(), count, order, hitScratch);
+        return {hits.data(), count};
     }
 
     // What build() emits for hits alone, two vertices at each distinct depth
@@ -97,12 +119,10 @@ struct TransmittanceBuilder::Impl {
     // one step a depth, its height after - before from the float values, flat
     // after it, and its hits' count.
     template <std::size_t NC>
-    static void prepareSteps(const std::vector<SurfaceHit>& hits, bool withCounts, SweepInput& out) {
-        std::size_t depths = 0;
-        for (std::size_t i = 0; i < hits.size(); ++i) depths += i == 0 || hits[i].z != hits[i - 1].z;
-        out.reserveDepths(depths, static_cast<int>(NC));
-        out.vertices_ = 2 * depths;
-        out.size_ = depths;
+    static void prepareSteps(std::span<const SurfaceHit> hits, bool withCounts, SweepInput& out) {
+        // Room for a depth a hit, at most what they take (counting them
+        // first cost a pass over the hits).
+        out.reserveDepths(hits.size(), static_cast<int>(NC));
         out.slopes_ = false;
         double surfaceTau[NC];
         float before[NC];
@@ -112,8 +132,8 @@ struct TransmittanceBuilder::Impl {
             before[c] = 1.0f;
             atZero[c] = false;
         }
-        std::size_t h = 0;
-        for (std::size_t d = 0; d < depths; ++d) {
+        std::size_t h = 0, d = 0;
+        for (; h < hits.size(); ++d) {
             const float z = hits[h].z;
             std::uint32_t hitCount = 0;
             for (; h < hits.size() && hits[h].z == z; ++h, ++hitCount)
@@ -132,6 +152,8 @@ struct TransmittanceBuilder::Impl {
             }
             out.stepData_[d] = step;
         }
+        out.size_ = d;
+        out.vertices_ = 2 * d;
     }
 };
 
@@ -152,21 +174,20 @@ void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCo
         out.assign(impl_->function);
         return;
     }
-    impl_->sortedHits(ray, channels, zStart);
+    const std::span<const SurfaceHit> hits = impl_->sortedHits(ray, channels, zStart);
     if (channels == 1)
-        Impl::prepareSteps<1>(impl_->hits, withCounts, out);
+        Impl::prepareSteps<1>(hits, withCounts, out);
     else
-        Impl::prepareSteps<kMaxChannels>(impl_->hits, withCounts, out);
+        Impl::prepareSteps<kMaxChannels>(hits, withCounts, out);
 }
 
 void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCounts, float zStart,
                                  VisibilityFunction& out) {
-    impl_->sortedHits(ray, channels, zStart);
-    std::vector<SurfaceHit>& hits = impl_->hits;
+    const std::span<const SurfaceHit> hits = impl_->sortedHits(ray, channels, zStart);
 
     std::vector<VolumeSample>& volume = impl_->volume;
     volume.assign(ray.volume.begin(), ray.volume.end());
-    sortByDepth(volume, impl_->order, impl_->volumeScratch);
+    sortByDepth(volume.data(), volume.size(), impl_->order, impl_->volumeScratch);
     // Keep only the volume beyond zStart, cutting a straddling segment at zStart.
     {
         const auto firstBeyond = std::find_if(volume.begin(), volume.end(),

@@ -99,8 +99,18 @@ private:
     template <std::size_t NC>
     std::size_t assignWith(const VisibilityView& f);
     // Points stepData_ and numberData_ at room for `depths` depths of
-    // `channels` channels and sets channels_.
-    void reserveDepths(std::size_t depths, int channels);
+    // `channels` channels and sets channels_. Inline where they fit inside
+    // (a sample's few hits, prepared by the million).
+    void reserveDepths(std::size_t depths, int channels) {
+        if (depths * static_cast<std::size_t>(channels) <= kInlineDepths) {
+            channels_ = channels;
+            stepData_ = inlineSteps_;
+            numberData_ = inlineNumbers_;
+        } else {
+            reserveHeapDepths(depths, channels);
+        }
+    }
+    void reserveHeapDepths(std::size_t depths, int channels);
 
     // Where the steps and numbers are: inside the object (inlineSteps_,
     // inlineNumbers_) or in the heap arrays.
