@@ -11,6 +11,7 @@
 #include <dsm/scene.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -22,6 +23,7 @@
 
 #include "map_fixtures.h"
 #include "light_rays.h"
+#include "raster_test.h"
 #include "ray_caster.h"
 #include "scanline_hider.h"
 #include "temp_dir.h"
@@ -287,6 +289,67 @@ TEST(Samplers, TilesBuiltInBandsGiveTheSamePixels) {
 // The bucketing projects the primitives on the build's threads: with
 // thousands of them (split among the threads) a build is the same to the
 // byte with one thread as with two.
+// The raster test lets through, in every variant this processor runs, the
+// samples a test written out one sample at a time lets through: ribbons
+// (axes of every direction and of no length, samples near their ends and
+// edges) and bounds, groups of 1 to 64 samples.
+TEST(ScanlineHider, RasterTestVariantsLetThroughTheSameSamples) {
+    using dsm::detail::RasterTest;
+    const auto oneByOne = [](const double* xs, const double* ys, std::size_t n, const RasterTest& t) {
+        std::uint64_t bits = 0;
+        for (std::size_t j = 0; j < n; ++j) {
+            bool pass;
+            if (t.radius2 >= 0.0) {
+                const double ex = xs[j] - t.x0, ey = ys[j] - t.y0;
+                const double along = std::clamp((ex * t.dx + ey * t.dy) * t.invLength2, 0.0, 1.0);
+                const double gx = ex - along * t.dx, gy = ey - along * t.dy;
+                pass = !(gx * gx + gy * gy > t.radius2);
+            } else {
+                pass = xs[j] >= t.boundsX0 && xs[j] <= t.boundsX1 && ys[j] >= t.boundsY0 && ys[j] <= t.boundsY1;
+            }
+            bits |= std::uint64_t(pass) << j;
+        }
+        return bits;
+    };
+    std::vector<dsm::detail::RasterTestFinder> variants{dsm::detail::baselineRasterTest(),
+                                                        dsm::detail::rasterTestFinder()};
+    if (dsm::detail::RasterTestFinder avx2 = dsm::detail::avx2RasterTest()) variants.push_back(avx2);
+    std::mt19937_64 rng(5);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    std::vector<double> xs(64 + dsm::detail::kRasterTestOverread), ys(xs.size());
+    std::size_t passed = 0, tested = 0;
+    for (int trial = 0; trial < 4000; ++trial) {
+        RasterTest t{};
+        t.x0 = 10.0 * unit(rng);
+        t.y0 = 10.0 * unit(rng);
+        t.dx = trial % 9 == 0 ? 0.0 : 6.0 * unit(rng) - 3.0;
+        t.dy = trial % 9 == 0 ? 0.0 : 6.0 * unit(rng) - 3.0;
+        const double length2 = t.dx * t.dx + t.dy * t.dy;
+        t.invLength2 = length2 > 0.0 ? 1.0 / length2 : 0.0;
+        t.radius2 = trial % 4 == 3 ? -1.0 : std::pow(2.0 * unit(rng), 2);
+        t.boundsX0 = 10.0 * unit(rng);
+        t.boundsY0 = 10.0 * unit(rng);
+        t.boundsX1 = t.boundsX0 + 4.0 * unit(rng);
+        t.boundsY1 = t.boundsY0 + 4.0 * unit(rng);
+        const std::size_t n = 1 + rng() % 64;
+        // Around the axis's middle, or the bounds.
+        const double cx = t.radius2 >= 0.0 ? t.x0 + 0.5 * t.dx : 0.5 * (t.boundsX0 + t.boundsX1);
+        const double cy = t.radius2 >= 0.0 ? t.y0 + 0.5 * t.dy : 0.5 * (t.boundsY0 + t.boundsY1);
+        for (std::size_t j = 0; j < xs.size(); ++j) {
+            xs[j] = cx + 8.0 * unit(rng) - 4.0;
+            ys[j] = cy + 8.0 * unit(rng) - 4.0;
+        }
+        const std::uint64_t expected = oneByOne(xs.data(), ys.data(), n, t);
+        for (std::size_t v = 0; v < variants.size(); ++v)
+            ASSERT_EQ(variants[v](xs.data(), ys.data(), n, t), expected) << "variant " << v << ", trial " << trial;
+        passed += std::size_t(std::popcount(expected));
+        tested += n;
+    }
+    // Both outcomes are common.
+    EXPECT_GT(passed, tested / 20);
+    EXPECT_LT(passed, tested - tested / 20);
+}
+
 TEST(ScanlineHider, BucketsDoNotDependOnTheThreadCount) {
     const TempDir dir;
     const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");

@@ -3,12 +3,10 @@
 #include <algorithm>
 #include <bit>
 #include <cmath>
-#include <cstring>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
-#include "simd_lanes.h"
 
 DSM_NAMESPACE_BEGIN
 
@@ -127,45 +125,6 @@ struct RasterProjection {
 
 }  // namespace
 
-// The samples among n <= 64 (raster positions xs, ys) that a primitive's
-// raster test lets through, bit j for sample j: for a still ribbon, those not
-// farther than its radius from its projected axis (which lies inside its
-// raster bounds), for any other primitive those inside its raster bounds.
-// Two samples at a time without a branch: the pixels a primitive's bounds
-// take in are whole, so most of their samples fail and the rest pass in no
-// order a predictor learns. An odd n reads one position past them (xs and ys
-// hold one more), whose bit is dropped. Both tests only let through more
-// than cross; the exact crossing decides.
-std::uint64_t ScanlineHider::rasterCandidates(const double* xs, const double* ys, std::size_t n,
-                                              const RasterBounds& b, const SegmentFootprint& f) {
-    using detail::Double2;
-    using detail::Mask2;
-    const auto splat = [](double v) { return Double2{v, v}; };
-    const Double2 bx0 = splat(b.x0), bx1 = splat(b.x1), by0 = splat(b.y0), by1 = splat(b.y1);
-    const bool ribbon = f.radius2 >= 0.0;
-    const Double2 fx0 = splat(f.x0), fy0 = splat(f.y0), fdx = splat(f.dx), fdy = splat(f.dy);
-    const Double2 inverse = splat(f.invLength2), radius2 = splat(f.radius2), zero = splat(0.0), one = splat(1.0);
-    std::uint64_t result = 0;
-    for (std::size_t j = 0; j < n; j += 2) {
-        Double2 x, y;
-        std::memcpy(&x, xs + j, sizeof x);
-        std::memcpy(&y, ys + j, sizeof y);
-        Mask2 pass;
-        if (ribbon) {
-            const Double2 ex = x - fx0, ey = y - fy0;
-            Double2 along = (ex * fdx + ey * fdy) * inverse;
-            along = along < zero ? zero : along;
-            along = along > one ? one : along;
-            const Double2 gx = ex - along * fdx, gy = ey - along * fdy;
-            pass = ~(gx * gx + gy * gy > radius2);
-        } else {
-            pass = (x >= bx0) & (x <= bx1) & (y >= by0) & (y <= by1);
-        }
-        result |= static_cast<std::uint64_t>(detail::laneMask(pass)) << j;
-    }
-    return n == 64 ? result : result & ((std::uint64_t(1) << n) - 1);
-}
-
 // Narrows [x0, x1] to the pixels of row y (samples with y <= sample y < y + 1)
 // that a footprint reaches: those within `radius` of the part of the axis
 // whose y lies within `radius` of the row. False when it misses the row.
@@ -200,6 +159,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
                              std::uint32_t height, std::uint32_t tileSize, std::uint32_t reach)
     : surfaces_(surfaces),
       frame_(detail::lightRayFrame(camera, width, height)),
+      passing_(detail::rasterTestFinder()),
       tilesX_((width + tileSize - 1) / tileSize),
       tilesY_((height + tileSize - 1) / tileSize) {
     const std::vector<Primitive>& primitives = surfaces.all();
@@ -313,15 +273,15 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     }
     const std::size_t tile = std::size_t(ty) * tilesX_ + tx;
     const std::uint32_t sw = pixels[2] - pixels[0];
-    // The samples' raster positions side by side, for rasterCandidates() (one
-    // more, for an odd group's last pair), and their screen positions, from
-    // which a candidate's ray is quick to make.
+    // The samples' raster positions side by side, for the raster test (with
+    // the positions past the last that it reads), and their screen positions,
+    // from which a candidate's ray is quick to make.
     std::vector<double>& xs = out.x;
     std::vector<double>& ys = out.y;
     std::vector<double>& sxs = out.screenX;
     std::vector<double>& sys = out.screenY;
-    xs.assign(samples.size() + 1, 0.0);
-    ys.assign(samples.size() + 1, 0.0);
+    xs.assign(samples.size() + detail::kRasterTestOverread, 0.0);
+    ys.assign(samples.size() + detail::kRasterTestOverread, 0.0);
     sxs.resize(samples.size());
     sys.resize(samples.size());
     for (std::size_t i = 0; i < samples.size(); ++i) {
@@ -359,6 +319,7 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         const auto x0 = static_cast<std::uint32_t>(px0), x1 = static_cast<std::uint32_t>(px1);
         const auto y0 = static_cast<std::uint32_t>(py0), y1 = static_cast<std::uint32_t>(py1);
         const double radius = f.radius2 >= 0.0 ? std::sqrt(f.radius2) : 0.0;
+        const detail::RasterTest test{b.x0, b.y0, b.x1, b.y1, f.x0, f.y0, f.dx, f.dy, f.invLength2, f.radius2};
         // A still primitive is crossed alike at every time (moved by zero):
         // its candidates' times are not read (an array apart, often not in
         // the cache).
@@ -370,7 +331,7 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
                 const std::size_t first = (std::size_t(y - pixels[1]) * sw + (x - pixels[0])) * spp;
                 for (std::size_t group = first; group < first + spp; group += 64) {
                     const std::size_t n = std::min<std::size_t>(64, first + spp - group);
-                    for (std::uint64_t pass = rasterCandidates(&xs[group], &ys[group], n, b, f); pass != 0;
+                    for (std::uint64_t pass = passing_(&xs[group], &ys[group], n, test); pass != 0;
                          pass &= pass - 1) {
                         const std::size_t k = group + static_cast<std::size_t>(std::countr_zero(pass));
                         Vec3 origin, direction;

@@ -18,6 +18,7 @@
 #include "dsm/scene.h"
 #include "dsm/transmittance.h"
 #include "light_rays.h"
+#include "raster_test.h"
 #include "scene_primitives.h"
 
 DSM_NAMESPACE_BEGIN
@@ -86,11 +87,10 @@ private:
 
     static bool footprintRow(const SegmentFootprint& f, double radius, std::uint32_t y, std::uint32_t& x0,
                              std::uint32_t& x1);
-    static std::uint64_t rasterCandidates(const double* xs, const double* ys, std::size_t n, const RasterBounds& b,
-                                          const SegmentFootprint& f);
 
     const ScenePrimitives& surfaces_;
     detail::LightRayFrame frame_;  // the samples' rays
+    detail::RasterTestFinder passing_;  // the raster test this processor runs fastest
     std::uint32_t tilesX_ = 0, tilesY_ = 0;
     std::vector<RasterBounds> raster_;           // per primitive
     std::vector<SegmentFootprint> footprints_;   // per primitive
