@@ -342,7 +342,6 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
         const std::size_t count = std::size_t(sw) * (pixels[3] - pixels[1]) * spp;
         if (ws.samples.size() < count) ws.samples.resize(count);
         const std::span<SampleData> samples(ws.samples.data(), count);
-        ws.surfaceHits.clear();
         for (std::uint32_t y = pixels[1]; y < pixels[3]; ++y)
             for (std::uint32_t x = pixels[0]; x < pixels[2]; ++x)
                 placeSamples(x, y, &samples[(std::size_t(y - pixels[1]) * sw + (x - pixels[0])) * spp], ws);
@@ -354,7 +353,8 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             }
             hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, objectOpacity, ws.hits);
             // The hider's hits, grouped by sample, become the tile's (its
-            // vectors trade storage, both kept).
+            // vectors trade storage, both kept, and the one handed back keeps
+            // its size: the hider sets only the slots it adds).
             ws.surfaceHits.swap(ws.hits.hits);
             for (std::size_t i = 0; i < count; ++i) {
                 samples[i].firstHit = ws.hits.start[i];
@@ -362,6 +362,7 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 addVolumeSamples(samples[i], ws.volume);
             }
         } else {
+            ws.surfaceHits.clear();
             for (SampleData& s : samples) {
                 Vec3 o, d;
                 frame.ray(s.x, s.y, o, d);
