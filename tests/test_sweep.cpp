@@ -182,21 +182,34 @@ TEST(Sweep, InputsOfStepsAloneSumInTheHeapsOrderBitForBit) {
     std::uniform_real_distribution<float> unit(0.0f, 1.0f), exponent(-6.0f, 6.0f);
     std::uniform_real_distribution<double> weight(0.01, 3.0);
     for (int channels : {1, 3}) {
-        for (int trial = 0; trial < 60; ++trial) {
+        for (int trial = 0; trial < 90; ++trial) {
             // From a handful of events (sorted by insertion) to hundreds
             // (radix), depths tied on a grid, spread over 2^-6 .. 2^6, all one
             // depth, or a few ulps apart (the radix passes over 4 down to 0
-            // bytes), some weights 0.
+            // bytes); bunches of close depths, which differ below the 16 bits
+            // that the radix passes sort (insertion finishes); or a bunch of
+            // a few ulps with one far away, which would make insertion
+            // quadratic (an exact radix sort finishes); some weights 0.
             const std::size_t functions = 1 + rng() % (trial % 3 == 0 ? 6 : 120);
             std::vector<VisibilityFunction> inputs;
             std::vector<double> weights;
             for (std::size_t k = 0; k < functions; ++k) {
                 std::vector<dsm::SurfaceHit> hits(rng() % 6);
                 for (dsm::SurfaceHit& h : hits) {
-                    switch (trial % 4) {
+                    switch (trial % 6) {
                         case 0: h.z = std::round(8.0f * unit(rng)) / 4.0f; break;
                         case 1: h.z = std::exp2(exponent(rng)); break;
                         case 2: h.z = 3.0f; break;  // one depth: nothing to sort
+                        case 4:  // bunches of a few ulps, spread over 2^20 ulps
+                            h.z = std::bit_cast<float>(std::bit_cast<std::uint32_t>(3.0f) +
+                                                       static_cast<std::uint32_t>(rng() % 64) * 16384u +
+                                                       static_cast<std::uint32_t>(rng() % 3));
+                            break;
+                        case 5:  // a bunch of 200 ulps, and now and then a depth far behind
+                            h.z = rng() % 50 == 0 ? 900.0f
+                                                  : std::bit_cast<float>(std::bit_cast<std::uint32_t>(3.0f) +
+                                                                         static_cast<std::uint32_t>(rng() % 200));
+                            break;
                         default:  // within 200 ulps: the keys differ in their low byte alone
                             h.z = std::bit_cast<float>(std::bit_cast<std::uint32_t>(3.0f) +
                                                        static_cast<std::uint32_t>(rng() % 200));

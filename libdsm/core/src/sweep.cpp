@@ -78,14 +78,14 @@ void startsOfDigits(std::uint32_t* offset) {
 #endif
 }
 
-// One stable radix pass per byte of the depth, bytes [0, Passes), least
-// significant first, from `keys` through `scratch`: returns where the
-// sorted keys are.
+// One stable radix pass per 8 bits of the depth, bits [low, low + 8 Passes),
+// lowest first, from `keys` through `scratch`: returns where the sorted keys
+// are.
 template <int Passes>
-std::uint64_t* radixSortByDepth(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
+std::uint64_t* radixSortByDepth(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n, int low) {
     std::uint32_t offsets[Passes][256] = {};
     for (std::size_t i = 0; i < n; ++i) {
-        const std::uint32_t depth = depthOf(keys[i]);
+        const std::uint32_t depth = depthOf(keys[i]) >> low;
         for (int b = 0; b < Passes; ++b) ++offsets[b][(depth >> (8 * b)) & 255u];
     }
     std::uint64_t* from = keys;
@@ -93,23 +93,44 @@ std::uint64_t* radixSortByDepth(std::uint64_t* keys, std::uint64_t* scratch, std
     for (int b = 0; b < Passes; ++b) {
         std::uint32_t* offset = offsets[b];
         startsOfDigits(offset);
-        const int shift = 32 + 8 * b;
+        const int shift = 32 + low + 8 * b;
         for (std::size_t i = 0; i < n; ++i) to[offset[(from[i] >> shift) & 255u]++] = from[i];
         std::swap(from, to);
     }
     return from;
 }
 
+// Finishes sorting keys[0, n) by insertion, unless that would move them more
+// than `budget` places in all: true when sorted.
+bool insertionSortWithin(std::uint64_t* keys, std::size_t n, std::size_t budget) {
+    for (std::size_t i = 1; i < n; ++i) {
+        const std::uint64_t key = keys[i];
+        std::size_t j = i;
+        for (; j > 0 && key < keys[j - 1]; --j) keys[j] = keys[j - 1];
+        keys[j] = key;
+        const std::size_t moved = i - j;
+        if (moved > budget) return false;
+        budget -= moved;
+    }
+    return true;
+}
+
 // Sorts keys[0, n) into (depth, input) order and returns where they are
 // (keys or scratch, room for n each): inputs whose steps are all gathered in
 // input order, each key (depth << 32 | event index), so that a stable sort
-// on the depth alone keeps ties in input order, the heap's order. Small runs
-// by insertion (keys are unique); longer ones by a stable radix sort on the
-// depth's bytes up to the highest in which two keys differ (depths within a
-// pixel share their top byte or two). No comparison that a processor could
+// on the depth alone keeps ties in input order, the heap's order, and so
+// does a sort of the whole keys. Small runs by insertion (keys are unique);
+// longer ones by a stable radix sort of the depth's 16 highest bits in which
+// two keys differ (depths within a pixel share their top byte or two), and
+// when lower bits differ too, insertion finishes: each key then lies among
+// the few with the same high bits (on the hair ball, this is cheaper than a
+// third radix pass). Keys bunched in a few values of those bits would make
+// insertion quadratic: past a budget of moves, an exact radix sort of the
+// keys as they are finishes instead. Few comparisons that a processor could
 // mispredict, unlike the heap's.
 std::uint64_t* sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
     constexpr std::size_t kInsertionLimit = 24;
+    constexpr std::size_t kMovesPerKey = 4;
     if (n <= kInsertionLimit) {
         detail::insertionSort(keys, n, std::less<>());
         return keys;
@@ -117,13 +138,14 @@ std::uint64_t* sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size
     const std::uint32_t first = depthOf(keys[0]);
     std::uint32_t differ = 0;
     for (std::size_t i = 1; i < n; ++i) differ |= depthOf(keys[i]) ^ first;
-    switch ((std::bit_width(differ) + 7) / 8) {
-        case 0: return keys;  // one depth: in input order already
-        case 1: return radixSortByDepth<1>(keys, scratch, n);
-        case 2: return radixSortByDepth<2>(keys, scratch, n);
-        case 3: return radixSortByDepth<3>(keys, scratch, n);
-        default: return radixSortByDepth<4>(keys, scratch, n);
-    }
+    const int width = std::bit_width(differ);
+    if (width == 0) return keys;  // one depth: in input order already
+    if (width <= 8) return radixSortByDepth<1>(keys, scratch, n, 0);
+    if (width <= 16) return radixSortByDepth<2>(keys, scratch, n, 0);
+    std::uint64_t* sorted = radixSortByDepth<2>(keys, scratch, n, width - 16);
+    if (insertionSortWithin(sorted, n, kMovesPerKey * n)) return sorted;
+    std::uint64_t* other = sorted == keys ? scratch : keys;
+    return width <= 24 ? radixSortByDepth<3>(sorted, other, n, 0) : radixSortByDepth<4>(sorted, other, n, 0);
 }
 
 // Out of line, so that the loops that check counts stay small enough to inline.
