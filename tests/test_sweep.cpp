@@ -185,8 +185,8 @@ TEST(Sweep, InputsOfStepsAloneSumInTheHeapsOrderBitForBit) {
         for (int trial = 0; trial < 90; ++trial) {
             // From a handful of events (sorted by insertion) to hundreds
             // (radix), depths tied on a grid, spread over 2^-6 .. 2^6, all one
-            // depth, or a few ulps apart (the radix passes over 4 down to 0
-            // bytes); bunches of close depths, which differ below the 16 bits
+            // depth, or a few ulps apart (no radix pass, one, or two and
+            // insertion); bunches of close depths, which differ below the 16 bits
             // that the radix passes sort (insertion finishes); or a bunch of
             // a few ulps with one far away, which would make insertion
             // quadratic (an exact radix sort finishes); some weights 0.
