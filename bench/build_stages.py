@@ -61,10 +61,11 @@ def main():
     tree = annotate(profile, "--tree=caller")
     whole = number(re.search(r"([\d,]+)\s+PROGRAM TOTALS", flat).group(1))
     build = largest(flat, "dsm::v0::buildMap(dsm::v0::Scene const&")
-    # The sweep of a build's pixels: over prepared inputs (this version) or
+    # The sweep of a build's pixels: over prepared inputs (this version;
+    # the mip levels' sweeps, through the same call, are part of writing) or
     # over views of the transmittances (before).
-    sweep = max(largest(flat, "Sweeper::sweep(dsm::v0::Span<dsm::v0::SweepInput const* const>, "
-                              "dsm::v0::Span<double const>, int, dsm::v0::SweptVertices&"),
+    sweep = max(called_from(tree, "Sweeper::sweep(dsm::v0::Span<dsm::v0::SweepInput const* const>, "
+                                  "dsm::v0::Span<double const>, int, dsm::v0::SweptVertices&", "PixelBuilder"),
                 largest(flat, "Sweeper::sweep(dsm::v0::Span<dsm::v0::VisibilityView const>, "
                               "dsm::v0::Span<double const>, int, dsm::v0::VertexSink&"))
     stages = [
@@ -73,9 +74,14 @@ def main():
         ("transmittance (built, and prepared for the sweep)",
          largest(flat, "TransmittanceBuilder::build(") + called_from(tree, "SweepInput::assign(", "buildMap")),
         ("sweep (filtering, output buffered)", sweep),
-        ("compression", largest(flat, "Compressor::pushValid(float const*, double const*")
+        # The level-0 pixels' compression; the mip levels' is part of writing.
+        ("compression", called_from(tree, "Compressor::pushValid(float const*, double const*", "PixelBuilder")
          + called_from(tree, "Compressor::finish()", "PixelBuilder")),
-        ("writing tiles", largest(flat, "MapWriter::writeTile(") + largest(flat, "MapWriter::finish()")),
+        # A tile prepared on a worker and appended on the writer's turn, or
+        # written whole by writeTile() (which appends through writePreparedTile()).
+        ("writing tiles", largest(flat, "MapWriter::prepareTile(")
+         + max(largest(flat, "MapWriter::writeTile("), largest(flat, "MapWriter::writePreparedTile("))
+         + largest(flat, "MapWriter::finish()")),
     ]
     after = sum(v for _, v in stages[2:])
     print("| stage (inclusive) | per sample | share of the build |")
