@@ -7,13 +7,18 @@
 #include <dsm/dsm.h>
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <limits>
+#include <mutex>
 #include <random>
 #include <ostream>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "map_fixtures.h"
@@ -346,6 +351,147 @@ TEST(WriterSafety, BadOptionsAreRefusedWithoutLeavingFiles) {
     const std::string nowhere = (dir / "missing" / "map.dsm").string();
     const std::string m = messageOf([&] { MapWriter w(nowhere, smallOptions()); });
     EXPECT_NE(m.find(nowhere), std::string::npos) << m;
+}
+
+// Tiles prepared on several threads (MapWriter::prepareTile()) while the
+// writer appends the ones ready, in row order, give the file writeTile()
+// gives, byte for byte: an odd-sized map of small tiles with value steps,
+// counts, mip levels, RGB and empty tiles, so that the coarser levels average
+// edge pixels and tiles of no pixels. Run under ThreadSanitizer too.
+std::vector<VisibilityFunction> randomTile(const MapWriter& w, std::uint32_t tx, std::uint32_t ty) {
+    std::mt19937 rng(1000 * ty + tx);
+    std::uniform_real_distribution<float> unit(0.0f, 1.0f);
+    std::vector<VisibilityFunction> pixels(std::size_t(w.tileWidth(tx)) * w.tileHeight(ty));
+    if ((tx + 2 * ty) % 5 == 0) {
+        for (VisibilityFunction& f : pixels) f = VisibilityFunction(1, true);  // a tile of empty pixels
+        return pixels;
+    }
+    for (VisibilityFunction& f : pixels) {
+        const int channels = rng() % 4 == 0 ? 3 : 1;
+        f = VisibilityFunction(channels, true);
+        float z = 1.0f + unit(rng), v[3] = {1.0f, 1.0f, 1.0f};
+        const int vertices = static_cast<int>(rng() % 6);
+        for (int i = 0; i < vertices; ++i) {
+            for (int c = 0; c < channels; ++c) v[c] *= unit(rng);
+            f.append(z, v, 1 + rng() % 9);
+            z += 0.01f + unit(rng);
+        }
+    }
+    return pixels;
+}
+
+WriterOptions preparedOptions() {
+    WriterOptions o;
+    o.width = 37;
+    o.height = 22;
+    o.tileSize = 4;  // 10 x 6 tiles, the last of each row and column partial
+    o.channels = 3;
+    o.counts = true;
+    o.tolerance = 0.05;
+    o.quantiseValues = true;
+    return o;
+}
+
+std::string contentsOf(const std::filesystem::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+TEST(PreparedTiles, PreparedOnThreadsGiveTheFileWriteTileGives) {
+    TempDir dir;
+    const auto serialPath = dir / "serial.dsm", preparedPath = dir / "prepared.dsm";
+    {
+        MapWriter w(serialPath.string(), preparedOptions());
+        for (std::uint32_t ty = 0; ty < w.tilesY(); ++ty)
+            for (std::uint32_t tx = 0; tx < w.tilesX(); ++tx) w.writeTile(tx, ty, randomTile(w, tx, ty));
+        w.finish();
+    }
+    {
+        MapWriter w(preparedPath.string(), preparedOptions());
+        const std::uint32_t tiles = w.tilesX() * w.tilesY();
+        std::vector<std::vector<VisibilityFunction>> pixels(tiles);
+        std::vector<dsm::PreparedTile> prepared(tiles);
+        std::vector<std::atomic<bool>> ready(tiles);
+        std::atomic<std::uint32_t> next{0};
+        std::atomic<bool> failed{false};
+        std::mutex failureMutex;
+        std::string failure;
+        std::vector<std::thread> workers;
+        for (int k = 0; k < 3; ++k)
+            workers.emplace_back([&] {
+                try {
+                    for (std::uint32_t i; (i = next++) < tiles;) {
+                        const std::uint32_t tx = i % w.tilesX(), ty = i / w.tilesX();
+                        pixels[i] = randomTile(w, tx, ty);
+                        w.prepareTile(tx, ty, pixels[i], prepared[i]);
+                        ready[i].store(true, std::memory_order_release);
+                    }
+                } catch (const std::exception& e) {
+                    const std::lock_guard<std::mutex> lock(failureMutex);
+                    failure = e.what();
+                    failed = true;
+                }
+            });
+        // The writer's thread appends each tile as soon as it and those before it are ready.
+        for (std::uint32_t i = 0; i < tiles && !failed; ++i) {
+            while (!ready[i].load(std::memory_order_acquire) && !failed) std::this_thread::yield();
+            if (!failed) w.writePreparedTile(prepared[i]);
+        }
+        for (std::thread& t : workers) t.join();
+        ASSERT_FALSE(failed) << failure;
+        w.finish();
+    }
+    const std::string serial = contentsOf(serialPath), fromPrepared = contentsOf(preparedPath);
+    ASSERT_GT(serial.size(), 1000u);
+    EXPECT_TRUE(serial == fromPrepared) << serial.size() << " bytes against " << fromPrepared.size();
+    EXPECT_NO_THROW(dsm::validate(preparedPath.string()));
+}
+
+TEST(PreparedTiles, TilesNotReadyOrWrittenBeforeAreRefused) {
+    TempDir dir;
+    const auto path = dir / "map.dsm";
+    {
+        MapWriter w(path.string(), preparedOptions());
+        dsm::PreparedTile never;
+        std::string m = messageOf([&] { w.writePreparedTile(never); });
+        EXPECT_NE(m.find(path.string()), std::string::npos) << m;
+        EXPECT_NE(m.find("not prepared"), std::string::npos) << m;
+
+        // Written once only.
+        std::vector<VisibilityFunction> pixels = randomTile(w, 1, 0);
+        dsm::PreparedTile t;
+        w.prepareTile(1, 0, pixels, t);
+        w.writePreparedTile(t);
+        m = messageOf([&] { w.writePreparedTile(t); });
+        EXPECT_NE(m.find("written already"), std::string::npos) << m;
+
+        // A tile written by writeTile() before.
+        w.writeTile(2, 0, randomTile(w, 2, 0));
+        pixels = randomTile(w, 2, 0);
+        w.prepareTile(2, 0, pixels, t);
+        m = messageOf([&] { w.writePreparedTile(t); });
+        EXPECT_NE(m.find("tile 2,0"), std::string::npos) << m;
+        EXPECT_NE(m.find("written twice"), std::string::npos) << m;
+
+        // A failed preparation names the tile and pixel, leaves the tile not
+        // ready and its pixels as they were.
+        pixels = randomTile(w, 3, 0);
+        pixels.back() = ramp(1.0f, 3, false);  // no counts in a map of counts
+        const std::vector<VisibilityFunction> before = pixels;
+        m = messageOf([&] { w.prepareTile(3, 0, pixels, t); });
+        EXPECT_NE(m.find("tile 3,0 pixel 15,3"), std::string::npos) << m;
+        EXPECT_NE(m.find("sample counts"), std::string::npos) << m;
+        for (std::size_t p = 0; p < pixels.size(); ++p)
+            ASSERT_TRUE(pixels[p].view().allValues().size() == before[p].view().allValues().size() &&
+                        std::equal(pixels[p].view().allValues().begin(), pixels[p].view().allValues().end(),
+                                   before[p].view().allValues().begin()))
+                << "pixel " << p;
+        m = messageOf([&] { w.writePreparedTile(t); });
+        EXPECT_NE(m.find("not prepared"), std::string::npos) << m;
+        m = messageOf([&] { w.prepareTile(10, 0, pixels, t); });
+        EXPECT_NE(m.find("outside the 10x6 tiles"), std::string::npos) << m;
+    }
+    EXPECT_EQ(dsm::test::listDirectory(dir.path()), Names{});
 }
 
 }  // namespace

@@ -115,6 +115,7 @@ struct TileStats {
     std::uint64_t rawVertices = 0;
     std::uint64_t vertices = 0;
     std::uint32_t maxVertices = 0;
+    double preparingSeconds = 0.0;  // the tile made ready for the file (writing)
 };
 
 // Defaults of a map built for an area light, chosen from the error budget
@@ -492,16 +493,21 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     // in order (the file is the same for any thread count), so no row waits
     // for its slowest tile. At most `inFlight` tiles are held at once; tile i
     // lives in slot i % inFlight, free again by then because the writer takes
-    // tiles in order.
+    // tiles in order. The worker that built a tile also prepares it for the
+    // file (encoding, compression, its level-1 pixels): only appending it and
+    // the coarser levels are left to the writer's turn, which every tile
+    // passes through one at a time.
     const std::size_t inFlight = tilesInFlight(tilesX, static_cast<unsigned>(arena.max_concurrency()));
     std::vector<std::vector<VisibilityFunction>> slotTiles(inFlight);
+    std::vector<PreparedTile> slotPrepared(inFlight);
     std::vector<TileStats> slotStats(inFlight);
     std::uint64_t nextTile = 0;
     auto writeTile = [&](std::uint64_t i) {
         const auto start = Clock::now();
         const std::uint32_t tx = static_cast<std::uint32_t>(i % tilesX), ty = static_cast<std::uint32_t>(i / tilesX);
-        writer.writeTile(tx, ty, slotTiles[i % inFlight]);
+        writer.writePreparedTile(slotPrepared[i % inFlight]);
         const TileStats& s = slotStats[i % inFlight];
+        result.writingSeconds += s.preparingSeconds;
         result.samplingSeconds += s.castSeconds + s.timings.transmittanceSeconds;
         result.crossingSeconds += s.castSeconds;
         result.sweepSeconds += s.timings.sweepSeconds;
@@ -525,9 +531,13 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                                                                [&](std::uint64_t i) {
                                                                    TileStats& stats = slotStats[i % inFlight];
                                                                    stats = TileStats{};
-                                                                   computeTile(static_cast<std::uint32_t>(i % tilesX),
-                                                                               static_cast<std::uint32_t>(i / tilesX),
-                                                                               slotTiles[i % inFlight], stats);
+                                                                   const std::uint32_t tx = static_cast<std::uint32_t>(i % tilesX);
+                                                                   const std::uint32_t ty = static_cast<std::uint32_t>(i / tilesX);
+                                                                   computeTile(tx, ty, slotTiles[i % inFlight], stats);
+                                                                   const auto preparing = Clock::now();
+                                                                   writer.prepareTile(tx, ty, slotTiles[i % inFlight],
+                                                                                      slotPrepared[i % inFlight]);
+                                                                   stats.preparingSeconds = since(preparing);
                                                                    return i;
                                                                }) &
                 tbb::make_filter<std::uint64_t, void>(tbb::filter_mode::serial_in_order, writeTile));
@@ -544,7 +554,11 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 writer.finish();
                 result.writingSeconds += since(start);
             },
-            [&] { workspaces.clear(); }, [&] { std::vector<std::vector<VisibilityFunction>>().swap(slotTiles); });
+            [&] { workspaces.clear(); },
+            [&] {
+                std::vector<std::vector<VisibilityFunction>>().swap(slotTiles);
+                std::vector<PreparedTile>().swap(slotPrepared);
+            });
     });
     result.pixels = std::uint64_t(region[2] - region[0]) * (region[3] - region[1]);
     result.rawBytes = result.sampleVertices * (4u + 4u * static_cast<unsigned>(channels));

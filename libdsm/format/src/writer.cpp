@@ -42,6 +42,27 @@ struct PendingTile {
 
 }  // namespace
 
+// What prepareTile() makes of a level-0 tile, and its working memory, kept
+// from one tile to the next.
+struct PreparedTile::Impl {
+    std::uint32_t tx = 0, ty = 0;
+    bool ready = false;  // prepared and not yet written
+    bool empty = true;   // every pixel empty: no level-1 pixels to add
+    format::EncodedTile encoded;
+    // The level-1 pixels the tile covers (MapWriter::Impl::coarserBlock()), in
+    // row order; none without level 1 or when the tile is empty.
+    std::vector<VisibilityFunction> coarser;
+    FunctionAverager averager;
+    std::vector<VisibilityView> block;
+    std::vector<double> weights;
+    VisibilityFunction rounded;  // a pixel rounded to the level's step, before it takes the pixel's place
+};
+
+PreparedTile::PreparedTile() : impl_(std::make_unique<Impl>()) {}
+PreparedTile::~PreparedTile() = default;
+PreparedTile::PreparedTile(PreparedTile&&) noexcept = default;
+PreparedTile& PreparedTile::operator=(PreparedTile&&) noexcept = default;
+
 struct MapWriter::Impl {
     std::string path;
     WriterOptions options;
@@ -49,15 +70,27 @@ struct MapWriter::Impl {
     std::uint64_t offset = 0;
     std::vector<Level> levels;
     std::vector<std::map<std::uint32_t, PendingTile>> pending;  // per level >= 1
-    FunctionAverager averager;  // the coarser levels' pixels
+    // writeTile()'s tile, and the working memory of the levels >= 1 (built
+    // on the writer's thread).
+    PreparedTile serialTile;
+    std::vector<VisibilityFunction> level0Copy;  // writeTile()'s pixels, rounded
+    FunctionAverager averager;
+    std::vector<VisibilityView> block;
+    std::vector<double> weights;
+    std::vector<VisibilityFunction> coarser;
     VisibilityFunction rounded;  // a coarser pixel with its values rounded to the level's step
-    std::vector<VisibilityFunction> level0Copy;  // the level-0 tile being written, rounded
     // Coarser tiles written, kept for their functions' storage: the next
     // pending tile is averaged into them.
     std::vector<std::vector<VisibilityFunction>> spareTiles;
     bool finished = false;
 
     std::string where() const { return concat("'", path, "'"); }
+
+    // Level-0 tile (tx, ty) made ready for the file from its pixels, checked
+    // and with their values on the level's step (`empty` when all are
+    // empty): encoded, and its level-1 pixels averaged. Safe on any thread.
+    void prepareRounded(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> rounded, bool empty,
+                        PreparedTile::Impl& t) const;
 
     void writeBytes(const std::uint8_t* data, std::size_t size) {
         file->write(data, size);
@@ -68,16 +101,22 @@ struct MapWriter::Impl {
         return std::min(options.tileSize, levelExtent - t * options.tileSize);
     }
 
-    // `pixels`, their values already on the level's step, empty for a tile
-    // whose pixels are all empty: the parts of a region build and sparse maps
-    // are mostly such tiles, and they cost nothing to store or average.
-    void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, const std::vector<VisibilityFunction>& pixels) {
+    // The tile of `level` coded as stored, or nothing for a tile whose pixels
+    // are all empty (`pixels` empty, their values already on the level's
+    // step): the parts of a region build and sparse maps are mostly such
+    // tiles, and they cost nothing to store or average. Reads only what the
+    // constructor set: safe on any thread.
+    format::EncodedTile encode(unsigned level, Span<const VisibilityFunction> pixels) const {
+        const format::TileLayout layout{options.channels, options.counts, options.maxLayers, options.formatMinor >= 1,
+                                        levels[level].info.valueStep, options.codec};
+        return pixels.empty() ? format::EncodedTile{}
+                              : format::encodeTile(std::span(pixels.data(), pixels.size()), layout, codecLevel(options));
+    }
+
+    // Appends an encoded tile of `level` and enters it in the directory.
+    void store(unsigned level, std::uint32_t tx, std::uint32_t ty, format::EncodedTile& encoded) {
         Level& L = levels[level];
         const std::uint32_t index = ty * L.info.tilesX + tx;
-        const format::TileLayout layout{options.channels, options.counts, options.maxLayers, options.formatMinor >= 1,
-                                        L.info.valueStep, options.codec};
-        format::EncodedTile encoded =
-            pixels.empty() ? format::EncodedTile{} : format::encodeTile(pixels, layout, codecLevel(options));
         if (!encoded.stored.empty()) {
             encoded.summary.offset = offset;
             writeBytes(encoded.stored.data(), encoded.stored.size());
@@ -87,21 +126,91 @@ struct MapWriter::Impl {
         L.info.vertexCount += encoded.summary.vertexCount;
         L.info.nonEmptyPixels += encoded.summary.nonEmptyPixels;
         L.info.storedBytes += encoded.summary.storedBytes;
-        if (level + 1 < levels.size()) downsample(level, tx, ty, pixels);
     }
 
-    // Adds the coarser pixels covered by tile (tx, ty) of `level` to the parent
-    // tile, and writes the parent once all its children have arrived. With an
-    // even tile size each coarser pixel's 2 x 2 children lie in one tile.
-    void downsample(unsigned level, std::uint32_t tx, std::uint32_t ty, const std::vector<VisibilityFunction>& pixels) {
+    // A coarser tile (level >= 1), complete: stored, and averaged into its parent.
+    void acceptTile(unsigned level, std::uint32_t tx, std::uint32_t ty, const std::vector<VisibilityFunction>& pixels) {
+        format::EncodedTile encoded = encode(level, pixels);
+        store(level, tx, ty, encoded);
+        if (level + 1 == levels.size()) return;
+        if (!pixels.empty()) coarserBlock(level, tx, ty, pixels, averager, block, weights, coarser);
+        addToParent(level, tx, ty, pixels.empty() ? nullptr : &coarser);
+    }
+
+    // The pixels of level + 1 that tile (tx, ty) of `level` covers, averaged
+    // from its `pixels` into `out`, in row order over [x0 / 2, (x0 + w + 1) / 2)
+    // x [y0 / 2, (y0 + h + 1) / 2) for the tile's origin (x0, y0) and size w x h:
+    // with an even tile size each coarser pixel's 2 x 2 children lie in one
+    // tile. Reads only what the constructor set: safe on any thread, with
+    // working memory of its own.
+    void coarserBlock(unsigned level, std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels,
+                      FunctionAverager& averager, std::vector<VisibilityView>& block, std::vector<double>& weights,
+                      std::vector<VisibilityFunction>& out) const {
         const Level& child = levels[level];
         const Level& parent = levels[level + 1];
+        const std::uint32_t T = options.tileSize;
+        const std::uint32_t cw = tileExtent(child.info.width, tx), ch = tileExtent(child.info.height, ty);
+        const std::uint32_t x0 = tx * T, y0 = ty * T;  // child tile origin (child level pixels)
+        // With stored value steps the compressor leaves room for the rounding
+        // (value_step.h), so the level's stated tolerance holds as stored.
+        const double tolerance =
+            options.quantiseValues ? compressorTolerance(parent.info.tolerance) : parent.info.tolerance;
+        // Level-0 pixels covered by pixel x of `level` along one axis: fewer at
+        // the far edge of an odd-sized level, so each coarser pixel stays the
+        // exact average of the full-resolution pixels it covers.
+        const auto covered = [&](std::uint32_t x, std::uint32_t fullExtent) {
+            const std::uint64_t span = std::uint64_t(1) << level;
+            return static_cast<double>(std::min<std::uint64_t>((x + 1) * span, fullExtent) - x * span);
+        };
+        const std::uint32_t px0 = x0 / 2, px1 = (x0 + cw + 1) / 2, py0 = y0 / 2, py1 = (y0 + ch + 1) / 2;
+        if (out.size() < std::size_t(px1 - px0) * (py1 - py0)) out.resize(std::size_t(px1 - px0) * (py1 - py0));
+        for (std::uint32_t py = py0; py < py1; ++py) {
+            for (std::uint32_t px = px0; px < px1; ++px) {
+                block.clear();
+                weights.clear();
+                for (std::uint32_t dy = 0; dy < 2; ++dy)
+                    for (std::uint32_t dx = 0; dx < 2; ++dx) {
+                        const std::uint32_t cx = 2 * px + dx, cy = 2 * py + dy;
+                        if (cx < x0 + cw && cy < y0 + ch) {
+                            block.push_back(pixels[std::size_t(cy - y0) * cw + (cx - x0)].view());
+                            weights.push_back(covered(cx, options.width) * covered(cy, options.height));
+                        }
+                    }
+                averager.average(block, weights, tolerance, options.counts, options.centredCompression,
+                                 out[std::size_t(py - py0) * (px1 - px0) + (px - px0)]);
+            }
+        }
+    }
+
+    // Puts the coarser pixels of tile (tx, ty) of `level` (coarserBlock()'s,
+    // or none for an empty tile: the average of empty functions is empty, as
+    // the parent's pixels start) into the parent tile, and writes the parent
+    // once all its children have arrived. The pixels trade storage with the
+    // parent's.
+    void addToParent(unsigned level, std::uint32_t tx, std::uint32_t ty, std::vector<VisibilityFunction>* block) {
+        const Level& child = levels[level];
+        const Level& parent = levels[level + 1];
+        const std::uint32_t T = options.tileSize;
         const std::uint32_t ptx = tx / 2, pty = ty / 2;
         const std::uint32_t parentIndex = pty * parent.info.tilesX + ptx;
         PendingTile& p = pending[level + 1][parentIndex];
-        // Coarser pixels over an empty child tile are empty (the average of
-        // empty functions), as the parent's pixels start.
-        if (!pixels.empty()) averageIntoParent(level, tx, ty, pixels, p);
+        if (block) {
+            const std::uint32_t pw = tileExtent(parent.info.width, ptx), ph = tileExtent(parent.info.height, pty);
+            if (p.pixels.empty()) {
+                if (!spareTiles.empty()) {
+                    p.pixels = std::move(spareTiles.back());
+                    spareTiles.pop_back();
+                }
+                p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
+            }
+            const std::uint32_t cw = tileExtent(child.info.width, tx), ch = tileExtent(child.info.height, ty);
+            const std::uint32_t x0 = tx * T, y0 = ty * T;
+            const std::uint32_t px0 = x0 / 2, px1 = (x0 + cw + 1) / 2, py0 = y0 / 2, py1 = (y0 + ch + 1) / 2;
+            for (std::uint32_t py = py0; py < py1; ++py)
+                for (std::uint32_t px = px0; px < px1; ++px)
+                    std::swap(p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)],
+                              (*block)[std::size_t(py - py0) * (px1 - px0) + (px - px0)]);
+        }
         const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *
                                        (std::min(2 * pty + 2, child.info.tilesY) - 2 * pty);
         if (++p.childrenReceived == expected) {
@@ -114,56 +223,6 @@ struct MapWriter::Impl {
                 }
             acceptTile(level + 1, ptx, pty, done);
             spareTiles.push_back(std::move(done));
-        }
-    }
-
-    // The coarser pixels over tile (tx, ty) of `level`, averaged into the parent.
-    void averageIntoParent(unsigned level, std::uint32_t tx, std::uint32_t ty,
-                           const std::vector<VisibilityFunction>& pixels, PendingTile& p) {
-        const Level& child = levels[level];
-        const Level& parent = levels[level + 1];
-        const std::uint32_t T = options.tileSize;
-        const std::uint32_t ptx = tx / 2, pty = ty / 2;
-        const std::uint32_t pw = tileExtent(parent.info.width, ptx), ph = tileExtent(parent.info.height, pty);
-        if (p.pixels.empty()) {
-            if (!spareTiles.empty()) {
-                p.pixels = std::move(spareTiles.back());
-                spareTiles.pop_back();
-            }
-            p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
-        }
-
-        const std::uint32_t cw = tileExtent(child.info.width, tx);
-        const std::uint32_t x0 = tx * T, y0 = ty * T;  // child tile origin (child level pixels)
-        const std::uint32_t ch = tileExtent(child.info.height, ty);
-        // With stored value steps the compressor leaves room for the rounding
-        // (value_step.h), so the level's stated tolerance holds as stored.
-        const double tolerance =
-            options.quantiseValues ? compressorTolerance(parent.info.tolerance) : parent.info.tolerance;
-        std::vector<VisibilityView> block;
-        std::vector<double> weights;
-        // Level-0 pixels covered by pixel x of `level` along one axis: fewer at
-        // the far edge of an odd-sized level, so each coarser pixel stays the
-        // exact average of the full-resolution pixels it covers.
-        const auto covered = [&](std::uint32_t x, std::uint32_t fullExtent) {
-            const std::uint64_t span = std::uint64_t(1) << level;
-            return static_cast<double>(std::min<std::uint64_t>((x + 1) * span, fullExtent) - x * span);
-        };
-        for (std::uint32_t py = y0 / 2; py < (y0 + ch + 1) / 2; ++py) {
-            for (std::uint32_t px = x0 / 2; px < (x0 + cw + 1) / 2; ++px) {
-                block.clear();
-                weights.clear();
-                for (std::uint32_t dy = 0; dy < 2; ++dy)
-                    for (std::uint32_t dx = 0; dx < 2; ++dx) {
-                        const std::uint32_t cx = 2 * px + dx, cy = 2 * py + dy;
-                        if (cx < x0 + cw && cy < y0 + ch) {
-                            block.push_back(pixels[std::size_t(cy - y0) * cw + (cx - x0)].view());
-                            weights.push_back(covered(cx, options.width) * covered(cy, options.height));
-                        }
-                    }
-                averager.average(block, weights, tolerance, options.counts, options.centredCompression,
-                                 p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)]);
-            }
         }
     }
 };
@@ -250,15 +309,17 @@ std::uint32_t MapWriter::tileHeight(std::uint32_t ty) const {
     return impl_->tileExtent(impl_->levels[0].info.height, ty);
 }
 
-void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels) try {
-    Impl& s = *impl_;
-    const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
-    if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
-    if (tx >= tilesX() || ty >= tilesY())
-        throw Error(ErrorCode::argument, concat(where, ": outside the ", tilesX(), "x", tilesY(), " tiles of the map"));
-    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx])
-        throw Error(ErrorCode::argument, concat(where, ": written twice"));
-    const std::uint32_t w = tileWidth(tx), h = tileHeight(ty);
+namespace {
+
+// Throws dsm::Error unless `pixels` fit level-0 tile (tx, ty) of a map with
+// these options: their number, channels, counts and layers, and each a valid
+// function.
+void checkTile(const MapWriter& writer, const WriterOptions& options, const std::string& where, std::uint32_t tx,
+               std::uint32_t ty, Span<const VisibilityFunction> pixels) {
+    if (tx >= writer.tilesX() || ty >= writer.tilesY())
+        throw Error(ErrorCode::argument,
+                    concat(where, ": outside the ", writer.tilesX(), "x", writer.tilesY(), " tiles of the map"));
+    const std::uint32_t w = writer.tileWidth(tx), h = writer.tileHeight(ty);
     if (pixels.size() != std::size_t(w) * h)
         throw Error(ErrorCode::argument, concat(where, ": ", pixels.size(), " pixels given, the tile has ", w, "x", h));
     for (std::size_t p = 0; p < pixels.size(); ++p) {
@@ -266,31 +327,90 @@ void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const Visibil
         // Built only for a message: formatting it for every pixel cost more
         // than encoding the tile.
         const auto pixelWhere = [&] {
-            return concat(where, " pixel ", tx * s.options.tileSize + p % w, ",", ty * s.options.tileSize + p / w, ": ");
+            return concat(where, " pixel ", tx * options.tileSize + p % w, ",", ty * options.tileSize + p / w, ": ");
         };
-        if (f.channels() > s.options.channels)
+        if (f.channels() > options.channels)
             throw Error(ErrorCode::argument, concat(pixelWhere(), "RGB function in a monochrome map"));
-        if (s.options.counts && !f.hasCounts() && !f.empty())
+        if (options.counts && !f.hasCounts() && !f.empty())
             throw Error(ErrorCode::argument,
                         concat(pixelWhere(), "the map stores sample counts but the function has none"));
-        if (static_cast<int>(f.layerCount()) > s.options.maxLayers)
+        if (static_cast<int>(f.layerCount()) > options.maxLayers)
             throw Error(ErrorCode::argument,
-                        concat(pixelWhere(), f.layerCount(), " layers exceed the map's ", s.options.maxLayers));
+                        concat(pixelWhere(), f.layerCount(), " layers exceed the map's ", options.maxLayers));
         try {
             f.validate();
         } catch (const Error& e) {
             throw Error(e.code(), pixelWhere() + e.what());
         }
     }
-    const bool allEmpty = std::all_of(pixels.begin(), pixels.end(), [](const VisibilityFunction& f) { return f.empty(); });
-    // The writer keeps the pixels with their values rounded to the level's
-    // step (a copy when there is none), in the functions of the tile before,
-    // so that it allocates nothing once they have grown.
-    std::vector<VisibilityFunction> none;
-    std::vector<VisibilityFunction>& rounded = allEmpty ? none : s.level0Copy;
-    rounded.resize(allEmpty ? 0 : pixels.size());
-    for (std::size_t p = 0; p < rounded.size(); ++p) roundValues(pixels[p], s.levels[0].info.valueStep, rounded[p]);
-    s.acceptTile(0, tx, ty, rounded);
+}
+
+bool allEmpty(Span<const VisibilityFunction> pixels) {
+    return std::all_of(pixels.begin(), pixels.end(), [](const VisibilityFunction& f) { return f.empty(); });
+}
+
+}  // namespace
+
+void MapWriter::Impl::prepareRounded(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> rounded,
+                                     bool empty, PreparedTile::Impl& t) const {
+    const Span<const VisibilityFunction> stored = empty ? Span<const VisibilityFunction>() : rounded;
+    t.encoded = encode(0, stored);
+    if (levels.size() > 1 && !empty) coarserBlock(0, tx, ty, stored, t.averager, t.block, t.weights, t.coarser);
+    t.tx = tx;
+    t.ty = ty;
+    t.empty = empty;
+    t.ready = true;
+}
+
+void MapWriter::prepareTile(std::uint32_t tx, std::uint32_t ty, Span<VisibilityFunction> pixels,
+                            PreparedTile& out) const try {
+    const Impl& s = *impl_;
+    PreparedTile::Impl& t = *out.impl_;
+    t.ready = false;
+    checkTile(*this, s.options, concat(s.where(), " level 0 tile ", tx, ",", ty), tx, ty, pixels);
+    const bool empty = allEmpty(pixels);
+    const double step = s.levels[0].info.valueStep;
+    if (!empty && step > 0.0)
+        for (VisibilityFunction& f : pixels) {
+            roundValues(f, step, t.rounded);
+            std::swap(f, t.rounded);  // `rounded` keeps f's storage for the next pixel
+        }
+    s.prepareRounded(tx, ty, pixels, empty, t);
+} catch (const Error& e) {
+    throw e.withFile(impl_->path);
+}
+
+void MapWriter::writePreparedTile(PreparedTile& tile) try {
+    Impl& s = *impl_;
+    PreparedTile::Impl& t = *tile.impl_;
+    if (!t.ready) throw Error(ErrorCode::argument, concat(s.where(), ": a tile not prepared, or written already"));
+    const std::string where = concat(s.where(), " level 0 tile ", t.tx, ",", t.ty);
+    if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
+    if (s.levels[0].written[std::size_t(t.ty) * tilesX() + t.tx])
+        throw Error(ErrorCode::argument, concat(where, ": written twice"));
+    t.ready = false;
+    s.store(0, t.tx, t.ty, t.encoded);
+    if (s.levels.size() > 1) s.addToParent(0, t.tx, t.ty, t.empty ? nullptr : &t.coarser);
+} catch (const Error& e) {
+    throw e.withFile(impl_->path);
+}
+
+void MapWriter::writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels) try {
+    Impl& s = *impl_;
+    const std::string where = concat(s.where(), " level 0 tile ", tx, ",", ty);
+    if (s.finished) throw Error(ErrorCode::argument, concat(where, ": the file is already finished"));
+    checkTile(*this, s.options, where, tx, ty, pixels);
+    if (s.levels[0].written[std::size_t(ty) * tilesX() + tx])
+        throw Error(ErrorCode::argument, concat(where, ": written twice"));
+    // The pixels with their values rounded to the level's step (a copy when
+    // there is none), in the functions of the tile before, so that the
+    // writer allocates nothing once they have grown.
+    const bool empty = allEmpty(pixels);
+    s.level0Copy.resize(empty ? 0 : pixels.size());
+    for (std::size_t p = 0; p < s.level0Copy.size(); ++p)
+        roundValues(pixels[p], s.levels[0].info.valueStep, s.level0Copy[p]);
+    s.prepareRounded(tx, ty, s.level0Copy, empty, *s.serialTile.impl_);
+    writePreparedTile(s.serialTile);
 } catch (const Error& e) {
     throw e.withFile(impl_->path);
 }

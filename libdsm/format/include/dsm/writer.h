@@ -64,6 +64,25 @@ struct WriterOptions {
     std::string metadata = "{}";
 };
 
+/// A level-0 tile made ready for the file by MapWriter::prepareTile(), on
+/// any thread, for MapWriter::writePreparedTile() to append. Its storage is
+/// kept from one tile to the next: a producer keeps one per tile in flight.
+/// Not thread-safe: one thread at a time prepares or writes it.
+class DSM_API PreparedTile {
+public:
+    PreparedTile();
+    ~PreparedTile();
+    PreparedTile(PreparedTile&&) noexcept;
+    PreparedTile& operator=(PreparedTile&&) noexcept;
+    PreparedTile(const PreparedTile&) = delete;
+    PreparedTile& operator=(const PreparedTile&) = delete;
+
+private:
+    friend class MapWriter;
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
 /// Writes a map tile by tile. Level-0 tiles may come in any order; each is
 /// written to disk as soon as it arrives, and coarser levels are built from
 /// each 2 x 2 block of tiles as soon as the block is complete (exact averaging
@@ -75,10 +94,12 @@ struct WriterOptions {
 /// reached (an error, an exception, a crash) no file named `path` is created
 /// or replaced; the destructor removes the temporary file.
 ///
-/// Thread safety: not thread-safe; calls on one writer must not overlap
-/// (writeTile builds coarser levels and appends to the file). A producer that
-/// computes tiles on several threads hands them to the writer one at a time,
-/// in any order. Separate writers (to different paths) are independent.
+/// Thread safety: prepareTile() may run on any number of threads at once,
+/// also while another calls the other members; those must not overlap
+/// (writeTile() and writePreparedTile() build the coarser levels and append
+/// to the file). A producer that computes tiles on several threads prepares
+/// each on its own thread and hands them to the writer one at a time, in any
+/// order. Separate writers (to different paths) are independent.
 ///
 /// Failure: every error throws dsm::Error naming the file, tile and pixel as
 /// known; after a failure of writeTile() or finish() the writer is unusable,
@@ -102,6 +123,22 @@ public:
     /// order. Each is validated; channels, counts and layers must fit the
     /// options. Throws dsm::Error naming tile and pixel.
     void writeTile(std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels);
+
+    /// The part of writeTile() that needs neither the file nor other tiles:
+    /// checks the pixels as writeTile() does, rounds their values to the
+    /// level's step in place (so they become the tile as stored; writeTile()
+    /// rounds a copy), encodes and compresses the tile, and averages the
+    /// level-1 pixels it covers, into `out`. Thread-safe (see above), each
+    /// thread with its own pixels and `out`; not once finish() has begun.
+    /// Throws dsm::Error as writeTile() does, and `out` is then not ready to
+    /// write; the pixels are rounded only once every one has passed its checks.
+    void prepareTile(std::uint32_t tx, std::uint32_t ty, Span<VisibilityFunction> pixels, PreparedTile& out) const;
+    /// Appends a tile prepareTile() made ready, and builds what it completes
+    /// of the coarser levels: the file is byte for byte the one writeTile()
+    /// with the same pixels gives. Throws dsm::Error when `tile` is not ready
+    /// (never prepared, its preparation failed, or written already) or its
+    /// tile was written before.
+    void writePreparedTile(PreparedTile& tile);
 
     /// Completes the pyramid, writes directories and metadata, and renames the
     /// file into place. Throws dsm::Error naming the first missing tile.
