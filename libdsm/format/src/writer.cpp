@@ -40,6 +40,22 @@ struct PendingTile {
     unsigned childrenReceived = 0;
 };
 
+// The pixels of the next level that one tile covers, averaged from it
+// (MapWriter::Impl::averageCoarser()), with the working memory that takes.
+struct CoarserPixels {
+    std::vector<VisibilityFunction> pixels;  // row order over the tile's CoarserRect
+    FunctionAverager averager;
+    std::vector<VisibilityView> block;
+    std::vector<double> weights;
+};
+
+// The pixels [x0, x1) x [y0, y1) of level + 1 that a tile of `level` covers:
+// with an even tile size each coarser pixel's 2 x 2 children lie in one tile.
+struct CoarserRect {
+    std::uint32_t x0, x1, y0, y1;
+    std::size_t index(std::uint32_t x, std::uint32_t y) const { return std::size_t(y - y0) * (x1 - x0) + (x - x0); }
+};
+
 }  // namespace
 
 // What prepareTile() makes of a level-0 tile, and its working memory, kept
@@ -49,12 +65,9 @@ struct PreparedTile::Impl {
     bool ready = false;  // prepared and not yet written
     bool empty = true;   // every pixel empty: no level-1 pixels to add
     format::EncodedTile encoded;
-    // The level-1 pixels the tile covers (MapWriter::Impl::coarserBlock()), in
-    // row order; none without level 1 or when the tile is empty.
-    std::vector<VisibilityFunction> coarser;
-    FunctionAverager averager;
-    std::vector<VisibilityView> block;
-    std::vector<double> weights;
+    // The level-1 pixels the tile covers; none without level 1 or when the
+    // tile is empty.
+    CoarserPixels coarser;
     VisibilityFunction rounded;  // a pixel rounded to the level's step, before it takes the pixel's place
 };
 
@@ -74,10 +87,7 @@ struct MapWriter::Impl {
     // on the writer's thread).
     PreparedTile serialTile;
     std::vector<VisibilityFunction> level0Copy;  // writeTile()'s pixels, rounded
-    FunctionAverager averager;
-    std::vector<VisibilityView> block;
-    std::vector<double> weights;
-    std::vector<VisibilityFunction> coarser;
+    CoarserPixels coarser;
     VisibilityFunction rounded;  // a coarser pixel with its values rounded to the level's step
     // Coarser tiles written, kept for their functions' storage: the next
     // pending tile is averaged into them.
@@ -133,24 +143,26 @@ struct MapWriter::Impl {
         format::EncodedTile encoded = encode(level, pixels);
         store(level, tx, ty, encoded);
         if (level + 1 == levels.size()) return;
-        if (!pixels.empty()) coarserBlock(level, tx, ty, pixels, averager, block, weights, coarser);
-        addToParent(level, tx, ty, pixels.empty() ? nullptr : &coarser);
+        if (!pixels.empty()) averageCoarser(level, tx, ty, pixels, coarser);
+        addToParent(level, tx, ty, pixels.empty() ? nullptr : &coarser.pixels);
     }
 
-    // The pixels of level + 1 that tile (tx, ty) of `level` covers, averaged
-    // from its `pixels` into `out`, in row order over [x0 / 2, (x0 + w + 1) / 2)
-    // x [y0 / 2, (y0 + h + 1) / 2) for the tile's origin (x0, y0) and size w x h:
-    // with an even tile size each coarser pixel's 2 x 2 children lie in one
-    // tile. Reads only what the constructor set: safe on any thread, with
-    // working memory of its own.
-    void coarserBlock(unsigned level, std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels,
-                      FunctionAverager& averager, std::vector<VisibilityView>& block, std::vector<double>& weights,
-                      std::vector<VisibilityFunction>& out) const {
+    CoarserRect coarserRect(unsigned level, std::uint32_t tx, std::uint32_t ty) const {
+        const std::uint32_t x0 = tx * options.tileSize, y0 = ty * options.tileSize;
+        const std::uint32_t w = tileExtent(levels[level].info.width, tx), h = tileExtent(levels[level].info.height, ty);
+        return {x0 / 2, (x0 + w + 1) / 2, y0 / 2, (y0 + h + 1) / 2};
+    }
+
+    // The pixels of level + 1 that tile (tx, ty) of `level` covers
+    // (coarserRect()), averaged from its `pixels` into `out.pixels`. Reads
+    // only what the constructor set: safe on any thread, each with its own
+    // `out`.
+    void averageCoarser(unsigned level, std::uint32_t tx, std::uint32_t ty, Span<const VisibilityFunction> pixels,
+                        CoarserPixels& out) const {
         const Level& child = levels[level];
         const Level& parent = levels[level + 1];
-        const std::uint32_t T = options.tileSize;
         const std::uint32_t cw = tileExtent(child.info.width, tx), ch = tileExtent(child.info.height, ty);
-        const std::uint32_t x0 = tx * T, y0 = ty * T;  // child tile origin (child level pixels)
+        const std::uint32_t x0 = tx * options.tileSize, y0 = ty * options.tileSize;  // the tile's origin
         // With stored value steps the compressor leaves room for the rounding
         // (value_step.h), so the level's stated tolerance holds as stored.
         const double tolerance =
@@ -162,27 +174,28 @@ struct MapWriter::Impl {
             const std::uint64_t span = std::uint64_t(1) << level;
             return static_cast<double>(std::min<std::uint64_t>((x + 1) * span, fullExtent) - x * span);
         };
-        const std::uint32_t px0 = x0 / 2, px1 = (x0 + cw + 1) / 2, py0 = y0 / 2, py1 = (y0 + ch + 1) / 2;
-        if (out.size() < std::size_t(px1 - px0) * (py1 - py0)) out.resize(std::size_t(px1 - px0) * (py1 - py0));
-        for (std::uint32_t py = py0; py < py1; ++py) {
-            for (std::uint32_t px = px0; px < px1; ++px) {
-                block.clear();
-                weights.clear();
+        const CoarserRect rect = coarserRect(level, tx, ty);
+        const std::size_t count = std::size_t(rect.x1 - rect.x0) * (rect.y1 - rect.y0);
+        if (out.pixels.size() < count) out.pixels.resize(count);
+        for (std::uint32_t py = rect.y0; py < rect.y1; ++py) {
+            for (std::uint32_t px = rect.x0; px < rect.x1; ++px) {
+                out.block.clear();
+                out.weights.clear();
                 for (std::uint32_t dy = 0; dy < 2; ++dy)
                     for (std::uint32_t dx = 0; dx < 2; ++dx) {
                         const std::uint32_t cx = 2 * px + dx, cy = 2 * py + dy;
                         if (cx < x0 + cw && cy < y0 + ch) {
-                            block.push_back(pixels[std::size_t(cy - y0) * cw + (cx - x0)].view());
-                            weights.push_back(covered(cx, options.width) * covered(cy, options.height));
+                            out.block.push_back(pixels[std::size_t(cy - y0) * cw + (cx - x0)].view());
+                            out.weights.push_back(covered(cx, options.width) * covered(cy, options.height));
                         }
                     }
-                averager.average(block, weights, tolerance, options.counts, options.centredCompression,
-                                 out[std::size_t(py - py0) * (px1 - px0) + (px - px0)]);
+                out.averager.average(out.block, out.weights, tolerance, options.counts, options.centredCompression,
+                                     out.pixels[rect.index(px, py)]);
             }
         }
     }
 
-    // Puts the coarser pixels of tile (tx, ty) of `level` (coarserBlock()'s,
+    // Puts the coarser pixels of tile (tx, ty) of `level` (averageCoarser()'s,
     // or none for an empty tile: the average of empty functions is empty, as
     // the parent's pixels start) into the parent tile, and writes the parent
     // once all its children have arrived. The pixels trade storage with the
@@ -203,13 +216,10 @@ struct MapWriter::Impl {
                 }
                 p.pixels.assign(std::size_t(pw) * ph, VisibilityFunction(1, options.counts));
             }
-            const std::uint32_t cw = tileExtent(child.info.width, tx), ch = tileExtent(child.info.height, ty);
-            const std::uint32_t x0 = tx * T, y0 = ty * T;
-            const std::uint32_t px0 = x0 / 2, px1 = (x0 + cw + 1) / 2, py0 = y0 / 2, py1 = (y0 + ch + 1) / 2;
-            for (std::uint32_t py = py0; py < py1; ++py)
-                for (std::uint32_t px = px0; px < px1; ++px)
-                    std::swap(p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)],
-                              (*block)[std::size_t(py - py0) * (px1 - px0) + (px - px0)]);
+            const CoarserRect rect = coarserRect(level, tx, ty);
+            for (std::uint32_t py = rect.y0; py < rect.y1; ++py)
+                for (std::uint32_t px = rect.x0; px < rect.x1; ++px)
+                    std::swap(p.pixels[std::size_t(py - pty * T) * pw + (px - ptx * T)], (*block)[rect.index(px, py)]);
         }
         const std::uint32_t expected = (std::min(2 * ptx + 2, child.info.tilesX) - 2 * ptx) *
                                        (std::min(2 * pty + 2, child.info.tilesY) - 2 * pty);
@@ -355,7 +365,7 @@ void MapWriter::Impl::prepareRounded(std::uint32_t tx, std::uint32_t ty, Span<co
                                      bool empty, PreparedTile::Impl& t) const {
     const Span<const VisibilityFunction> stored = empty ? Span<const VisibilityFunction>() : rounded;
     t.encoded = encode(0, stored);
-    if (levels.size() > 1 && !empty) coarserBlock(0, tx, ty, stored, t.averager, t.block, t.weights, t.coarser);
+    if (levels.size() > 1 && !empty) averageCoarser(0, tx, ty, stored, t.coarser);
     t.tx = tx;
     t.ty = ty;
     t.empty = empty;
@@ -390,7 +400,7 @@ void MapWriter::writePreparedTile(PreparedTile& tile) try {
         throw Error(ErrorCode::argument, concat(where, ": written twice"));
     t.ready = false;
     s.store(0, t.tx, t.ty, t.encoded);
-    if (s.levels.size() > 1) s.addToParent(0, t.tx, t.ty, t.empty ? nullptr : &t.coarser);
+    if (s.levels.size() > 1) s.addToParent(0, t.tx, t.ty, t.empty ? nullptr : &t.coarser.pixels);
 } catch (const Error& e) {
     throw e.withFile(impl_->path);
 }
