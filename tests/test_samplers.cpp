@@ -177,7 +177,7 @@ TEST(ScanlineHider, FilesEachPrimitiveInTheTilesItReaches) {
 void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
     const dsm::RayCaster caster(scene, dsm::RayCaster::Surfaces::none);
     const dsm::ScenePrimitives& surfaces = caster.surfaces();
-    const std::vector<dsm::Primitive>& all = surfaces.all();
+    const auto& all = surfaces.all();
     dsm::LightDescription light = scene.light;
     light.width = light.height = size;
     const dsm::LightCamera camera = dsm::lightCamera(light);
@@ -214,7 +214,7 @@ void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
         sample.y = ry;
         dsm::Vec3 origin, direction;
         frame.ray(rx, ry, origin, direction);
-        std::vector<dsm::RaySurfaceHit> exact;
+        dsm::detail::LargeVector<dsm::RaySurfaceHit> exact;
         surfaces.intersect(p, origin, direction, 0.0, camera.nearPlane, exact);
         if (exact.empty()) continue;  // rounding put the ray just outside
         ++edgeCrossings;
@@ -375,7 +375,7 @@ std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& r
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const dsm::RayCaster caster(scene);
     const dsm::ScenePrimitives& surfaces = caster.surfaces();
-    const std::vector<dsm::Primitive>& all = surfaces.all();
+    const auto& all = surfaces.all();
     if (all.empty()) return 0;
     // Each ray is checked against every primitive: fewer rays through more primitives.
     const std::size_t rays = std::clamp<std::size_t>(10'000'000 / all.size(), 50, 3000);
@@ -392,7 +392,7 @@ std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& r
         const dsm::Vec3 origin{target[0] + distance * away[0], target[1] + distance * away[1],
                                target[2] + distance * away[2]};
         const dsm::Vec3 direction = distance == 0.0 ? away : dsm::Vec3{-away[0], -away[1], -away[2]};
-        std::vector<dsm::RaySurfaceHit> found, expected;
+        dsm::detail::LargeVector<dsm::RaySurfaceHit> found, expected;
         caster.surfaceHits(origin, direction, time, 0.0, found);
         for (const dsm::Primitive& p : all) surfaces.intersect(p, origin, direction, time, 0.0, expected);
         const auto key = [](const dsm::RaySurfaceHit& h) { return std::tie(h.t, h.object); };
@@ -442,7 +442,7 @@ TEST(RayCaster, FindsHairCrossingsAtTheRibbonsEdges) {
     const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");
     const dsm::RayCaster caster(scene);
     const dsm::ScenePrimitives& surfaces = caster.surfaces();
-    const std::vector<dsm::Primitive>& all = surfaces.all();
+    const auto& all = surfaces.all();
     std::mt19937_64 rng(5);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const auto sub = [](const dsm::Vec3& a, const dsm::Vec3& b) { return dsm::Vec3{a[0] - b[0], a[1] - b[1], a[2] - b[2]}; };
@@ -461,7 +461,7 @@ TEST(RayCaster, FindsHairCrossingsAtTheRibbonsEdges) {
         dsm::Vec3 origin;
         for (std::size_t a = 0; a < 3; ++a)
             origin[a] = seg.p0[a] + along * axis[a] + side[a] / sideLength * gap - distance * d[a];
-        std::vector<dsm::RaySurfaceHit> exact, found;
+        dsm::detail::LargeVector<dsm::RaySurfaceHit> exact, found;
         surfaces.intersect(p, origin, d, 0.0, 0.0, exact);
         if (exact.empty()) continue;  // the far origin's rounding put the ray just outside
         ++edgeCrossings;

@@ -80,24 +80,24 @@ struct SampleData {
 struct TileWorkspace {
     explicit TileWorkspace(const CompressorOptions& compression) : pixel(compression) {}
 
-    std::vector<SampleData> samples;  // of the tile's sample pixels, spp each
+    detail::LargeVector<SampleData> samples;  // of the tile's sample pixels, spp each
     // The samples' surface hits, one after the other in the samples' order:
     // a pass over the samples (building their transmittances) reads them in
     // turn instead of from a block of its own each.
-    std::vector<SurfaceHit> surfaceHits;
+    detail::LargeVector<SurfaceHit> surfaceHits;
     Span<const SurfaceHit> hitsOf(const SampleData& s) const {
         return Span<const SurfaceHit>(surfaceHits.data() + s.firstHit, s.hitCount);
     }
-    std::vector<std::uint32_t> timeSlot, cell;
-    std::vector<HiderSample> points;
+    detail::LargeVector<std::uint32_t> timeSlot, cell;
+    detail::LargeVector<HiderSample> points;
     ScanlineHider::TileHits hits;
-    std::vector<RaySurfaceHit> rayHits;
+    detail::LargeVector<RaySurfaceHit> rayHits;
     std::vector<RayVolumeSample> volume;
     // Per sample: its transmittance, prepared for the sweep when a pixel
     // first uses it, then shared by every pixel whose filter reaches the
     // sample.
-    std::vector<SweepInput> transmittances;
-    std::vector<unsigned char> built;
+    detail::LargeVector<SweepInput> transmittances;
+    detail::LargeVector<unsigned char> built;
     // A pixel's own rays, for BuildOptions::sampleRays.
     std::vector<SampleRay> ownRays;
     // One pixel's inputs, the first of each in use (sized for the largest).
@@ -294,14 +294,14 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
     // the tile or region).
     auto placeSamples = [&](std::uint32_t px, std::uint32_t py, SampleData* out, TileWorkspace& ws) {
         detail::SplitMix64 rng(detail::pixelSeed(options.seed, px, py));
-        std::vector<std::uint32_t>& timeSlot = ws.timeSlot;
+        auto& timeSlot = ws.timeSlot;
         timeSlot.resize(spp);
         for (std::uint32_t k = 0; k < spp; ++k) timeSlot[k] = k;
         for (std::uint32_t k = spp; k > 1; --k) std::swap(timeSlot[k - 1], timeSlot[rng.next() % k]);
         // Strata: cell k of the gridX x gridY grid. When the grid has more
         // cells than samples, spp of them are chosen at random per pixel, so
         // that no part of the pixel is left out every time (unbiased).
-        std::vector<std::uint32_t>& cell = ws.cell;
+        auto& cell = ws.cell;
         cell.resize(gridX * gridY);
         for (std::uint32_t k = 0; k < cell.size(); ++k) cell[k] = k;
         if (cell.size() > spp)

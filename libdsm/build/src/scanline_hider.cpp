@@ -162,7 +162,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
       passing_(detail::rasterTestFinder()),
       tilesX_((width + tileSize - 1) / tileSize),
       tilesY_((height + tileSize - 1) / tileSize) {
-    const std::vector<Primitive>& primitives = surfaces.all();
+    const detail::LargeVector<Primitive>& primitives = surfaces.all();
     raster_.resize(primitives.size());
     footprints_.resize(primitives.size());
     // Per primitive, its tile rectangle (or none): counted first, then filed.
@@ -276,10 +276,10 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     // The samples' raster positions side by side, for the raster test (with
     // the positions past the last that it reads), and their screen positions,
     // from which a candidate's ray is quick to make.
-    std::vector<double>& xs = out.x;
-    std::vector<double>& ys = out.y;
-    std::vector<double>& sxs = out.screenX;
-    std::vector<double>& sys = out.screenY;
+    auto& xs = out.x;
+    auto& ys = out.y;
+    auto& sxs = out.screenX;
+    auto& sys = out.screenY;
     xs.assign(samples.size() + detail::kRasterTestOverread, 0.0);
     ys.assign(samples.size() + detail::kRasterTestOverread, 0.0);
     sxs.resize(samples.size());
@@ -289,7 +289,7 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         ys[i] = samples[i].y;
         frame_.screen(samples[i].x, samples[i].y, sxs[i], sys[i]);
     }
-    const std::vector<Primitive>& primitives = surfaces_.all();
+    const detail::LargeVector<Primitive>& primitives = surfaces_.all();
     const std::size_t end = bucketStart_[tile + 1];
     for (std::size_t e = bucketStart_[tile]; e < end; ++e) {
         // A bucket's primitives lie scattered over the scene's arrays: ask
@@ -353,7 +353,7 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
     // Every slot is written below: resizing from the size the vector had
     // (not from empty) sets only the slots it gains.
     out.hits.resize(out.found.size());
-    std::vector<std::size_t>& next = out.start;  // each sample's next slot, then moved back below
+    auto& next = out.start;  // each sample's next slot, then moved back below
     for (std::size_t f = 0; f < out.found.size(); ++f)
         out.hits[next[out.foundSample[f]]++] = samplerHit(out.found[f], opacity);
     for (std::size_t i = samples.size(); i > 0; --i) next[i] = next[i - 1];

@@ -49,16 +49,16 @@ public:
     /// each as the sampler takes it (its depth as a float and its object's
     /// opacity). A caller reusing one from tile to tile keeps its storage.
     struct TileHits {
-        std::vector<std::size_t> start;
-        std::vector<SurfaceHit> hits;
+        detail::LargeVector<std::size_t> start;
+        detail::LargeVector<SurfaceHit> hits;
         std::span<const SurfaceHit> of(std::size_t i) const {
             return std::span<const SurfaceHit>(hits).subspan(start[i], start[i + 1] - start[i]);
         }
         // Found in the order of the primitives, with their samples, then
         // grouped by sample into `hits`.
-        std::vector<RaySurfaceHit> found;
-        std::vector<std::uint32_t> foundSample;
-        std::vector<double> x, y, screenX, screenY;  // the samples' positions side by side
+        detail::LargeVector<RaySurfaceHit> found;
+        detail::LargeVector<std::uint32_t> foundSample;
+        detail::LargeVector<double> x, y, screenX, screenY;  // the samples' positions side by side
     };
     /// The crossings with t > tMin of the samples of tile (tx, ty). The tile's
     /// samples cover the sample pixels [x0, x1) x [y0, y1) (`pixels`), spp per
@@ -92,10 +92,10 @@ private:
     detail::LightRayFrame frame_;  // the samples' rays
     detail::RasterTestFinder passing_;  // the raster test this processor runs fastest
     std::uint32_t tilesX_ = 0, tilesY_ = 0;
-    std::vector<RasterBounds> raster_;           // per primitive
-    std::vector<SegmentFootprint> footprints_;   // per primitive
-    std::vector<std::size_t> bucketStart_;       // per tile, and one past the last
-    std::vector<std::uint32_t> bucketPrimitives_;
+    detail::LargeVector<RasterBounds> raster_;          // per primitive
+    detail::LargeVector<SegmentFootprint> footprints_;  // per primitive
+    std::vector<std::size_t> bucketStart_;              // per tile, and one past the last
+    detail::LargeVector<std::uint32_t> bucketPrimitives_;
 };
 
 DSM_NAMESPACE_END

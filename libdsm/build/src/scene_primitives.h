@@ -15,6 +15,7 @@
 #include "affine.h"
 #include "dsm/scene.h"
 #include "dsm/transmittance.h"
+#include "huge_pages.h"
 #include "tested_internal.h"
 
 DSM_NAMESPACE_BEGIN
@@ -91,7 +92,7 @@ public:
     explicit ScenePrimitives(const Scene& scene);
 
     /// Every primitive; an object's primitives are consecutive, in object order.
-    const std::vector<Primitive>& all() const { return primitives_; }
+    const detail::LargeVector<Primitive>& all() const { return primitives_; }
     std::size_t size() const { return primitives_.size(); }
 
     /// The hair segment `p` is (p.kind == PrimitiveKind::Segment).
@@ -117,7 +118,7 @@ public:
     /// shutter time `time` in [0, 1) (the object's motion is undone on the
     /// ray's origin).
     [[gnu::always_inline]] void intersect(const Primitive& p, const Vec3& origin, const Vec3& direction, double time,
-                                          double tMin, std::vector<RaySurfaceHit>& out) const {
+                                          double tMin, detail::LargeVector<RaySurfaceHit>& out) const {
         const Vec3& m = motion_[p.object];
         const Vec3 o = time != 0.0 ? detail::sub(origin, detail::scale(m, time)) : origin;
         switch (p.kind) {
@@ -130,7 +131,7 @@ public:
 
 private:
     void intersectTriangle(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                           std::vector<RaySurfaceHit>& out) const {
+                           detail::LargeVector<RaySurfaceHit>& out) const {
         using namespace detail;
         const Triangle& tri = triangles_[p.index];
         const Vec3 e1 = sub(tri.b, tri.a), e2 = sub(tri.c, tri.a);
@@ -149,7 +150,7 @@ private:
     }
 
     void intersectSphere(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                         std::vector<RaySurfaceHit>& out) const {
+                         detail::LargeVector<RaySurfaceHit>& out) const {
         using namespace detail;
         const Sphere& s = spheres_[p.index];
         const Vec3 o = sub(transformPoint(s.worldToObject, origin), s.centre);
@@ -167,7 +168,7 @@ private:
     }
 
     void intersectQuad(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                       std::vector<RaySurfaceHit>& out) const {
+                       detail::LargeVector<RaySurfaceHit>& out) const {
         using namespace detail;
         const Quad& q = quads_[p.index];
         const Vec3 n = cross(q.u, q.v);
@@ -183,7 +184,7 @@ private:
     // A ribbon facing the ray: a hit where the ray passes the segment's axis
     // closer than its half-width.
     void intersectSegment(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                          std::vector<RaySurfaceHit>& out) const {
+                          detail::LargeVector<RaySurfaceHit>& out) const {
         using namespace detail;
         const Segment& s = segments_[p.index];
         const Vec3 v = sub(s.p1, s.p0), w0 = sub(origin, s.p0);
@@ -200,11 +201,11 @@ private:
     }
 
     std::vector<Vec3> motion_;  // per object
-    std::vector<Primitive> primitives_;
-    std::vector<Triangle> triangles_;
-    std::vector<Sphere> spheres_;
-    std::vector<Quad> quads_;
-    std::vector<Segment> segments_;
+    detail::LargeVector<Primitive> primitives_;
+    detail::LargeVector<Triangle> triangles_;
+    detail::LargeVector<Sphere> spheres_;
+    detail::LargeVector<Quad> quads_;
+    detail::LargeVector<Segment> segments_;
 };
 
 DSM_NAMESPACE_END
