@@ -384,7 +384,7 @@ Transmittance casterTransmittance(const dsm::RayCaster& caster, const dsm::Scene
     const Vec3 delta{to[0] - from[0], to[1] - from[1], to[2] - from[2]};
     const double length = std::sqrt(delta[0] * delta[0] + delta[1] * delta[1] + delta[2] * delta[2]);
     const Vec3 d{delta[0] / length, delta[1] / length, delta[2] / length};
-    dsm::detail::LargeVector<dsm::RaySurfaceHit> hits;
+    dsm::RaySurfaceHits hits;
     caster.surfaceHits(from, d, time, 0.0, hits);
     Transmittance result{1.0, 1.0, 1.0};
     for (const dsm::RaySurfaceHit& h : hits)
@@ -493,7 +493,7 @@ TEST(ReferenceTracer, AgreesWithTheSamplersCasterOnHairAwayFromJoints) {
         const Vec3 from{u(rng), u(rng), -3.0}, to{0.2 * u(rng), 0.2 * u(rng), 3.0};
         const Transmittance ours = tracer.transmittance(from, to);
         const Transmittance theirs = casterTransmittance(caster, scene, from, to, 0.0);
-        dsm::detail::LargeVector<dsm::RaySurfaceHit> hits;
+        dsm::RaySurfaceHits hits;
         caster.surfaceHits(from, {to[0] - from[0], to[1] - from[1], to[2] - from[2]}, 0.0, 0.0, hits);
         bool nearAPoint = false;
         for (const auto& p : hair.points)

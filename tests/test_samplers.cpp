@@ -214,7 +214,7 @@ void expectHiderFindsRibbonEdges(const dsm::Scene& scene, std::uint32_t size) {
         sample.y = ry;
         dsm::Vec3 origin, direction;
         frame.ray(rx, ry, origin, direction);
-        dsm::detail::LargeVector<dsm::RaySurfaceHit> exact;
+        dsm::RaySurfaceHits exact;
         surfaces.intersect(p, origin, direction, 0.0, camera.nearPlane, exact);
         if (exact.empty()) continue;  // rounding put the ray just outside
         ++edgeCrossings;
@@ -392,7 +392,7 @@ std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& r
         const dsm::Vec3 origin{target[0] + distance * away[0], target[1] + distance * away[1],
                                target[2] + distance * away[2]};
         const dsm::Vec3 direction = distance == 0.0 ? away : dsm::Vec3{-away[0], -away[1], -away[2]};
-        dsm::detail::LargeVector<dsm::RaySurfaceHit> found, expected;
+        dsm::RaySurfaceHits found, expected;
         caster.surfaceHits(origin, direction, time, 0.0, found);
         for (const dsm::Primitive& p : all) surfaces.intersect(p, origin, direction, time, 0.0, expected);
         const auto key = [](const dsm::RaySurfaceHit& h) { return std::tie(h.t, h.object); };
@@ -461,7 +461,7 @@ TEST(RayCaster, FindsHairCrossingsAtTheRibbonsEdges) {
         dsm::Vec3 origin;
         for (std::size_t a = 0; a < 3; ++a)
             origin[a] = seg.p0[a] + along * axis[a] + side[a] / sideLength * gap - distance * d[a];
-        dsm::detail::LargeVector<dsm::RaySurfaceHit> exact, found;
+        dsm::RaySurfaceHits exact, found;
         surfaces.intersect(p, origin, d, 0.0, 0.0, exact);
         if (exact.empty()) continue;  // the far origin's rounding put the ray just outside
         ++edgeCrossings;

@@ -39,7 +39,7 @@ DepthShadowMap DepthShadowMap::render(const Scene& scene, const DepthMapOptions&
     tbb::task_arena arena(static_cast<int>(usableThreads(options.threads)));
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::uint32_t>(0, map.height_), [&](const auto& rows) {
-            detail::LargeVector<RaySurfaceHit> hits;
+            RaySurfaceHits hits;
             for (std::uint32_t y = rows.begin(); y != rows.end(); ++y)
                 for (std::uint32_t x = 0; x < map.width_; ++x) {
                     detail::SplitMix64 rng(detail::pixelSeed(options.seed, x, y));

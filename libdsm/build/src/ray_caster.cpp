@@ -78,7 +78,7 @@ struct HitContext {
     Vec3 origin{}, direction{};
     double time = 0.0;
     double tMin = 0.0;
-    detail::LargeVector<RaySurfaceHit>* out = nullptr;
+    RaySurfaceHits* out = nullptr;
 };
 static_assert(std::is_standard_layout_v<HitContext>);
 
@@ -148,7 +148,7 @@ struct RayCaster::Impl {
     // test crosses (the widening is orders beyond the rounding).
     void addRibbons(OwnedGeometry& g, std::size_t first, std::size_t end, const Vec3& motion, bool moving,
                     const std::string& what) {
-        const detail::LargeVector<Primitive>& primitives = surfaces.all();
+        const auto& primitives = surfaces.all();
         const std::size_t count = end - first;
         for (unsigned step = 0; step < (moving ? 2u : 1u); ++step) {
             auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_VERTEX, step,
@@ -172,7 +172,7 @@ struct RayCaster::Impl {
     // Embree's hierarchy over the surfaces: one geometry per object,
     // with a second time step for a moving one (its boxes follow it).
     void build(const Scene& scene) {
-        const detail::LargeVector<Primitive>& primitives = surfaces.all();
+        const auto& primitives = surfaces.all();
         if (primitives.empty()) return;
         for (const Primitive& p : primitives) sceneBox.grow(surfaces.bounds(p));
         double size = 0.0;
@@ -248,7 +248,7 @@ std::size_t RayCaster::primitiveCount() const { return impl_->surfaces.size(); }
 const ScenePrimitives& RayCaster::surfaces() const { return impl_->surfaces; }
 
 void RayCaster::surfaceHits(const Vec3& origin, const Vec3& direction, double time, double tMin,
-                            detail::LargeVector<RaySurfaceHit>& out) const {
+                            RaySurfaceHits& out) const {
     const Impl& s = *impl_;
     if (s.embreeScene == nullptr) return;
     const Vec3 inv{1.0 / direction[0], 1.0 / direction[1], 1.0 / direction[2]};

@@ -38,7 +38,7 @@ public:
     /// Every surface crossing of origin + t * direction with t > tMin at
     /// shutter time `time` in [0, 1), appended to `out` in no particular order.
     void surfaceHits(const Vec3& origin, const Vec3& direction, double time, double tMin,
-                     detail::LargeVector<RaySurfaceHit>& out) const;
+                     RaySurfaceHits& out) const;
 
     /// Extinction samples along the ray through every volume, in increasing t,
     /// appended to `out`. Each volume is sampled every `step` world units of

@@ -91,7 +91,7 @@ struct TileWorkspace {
     detail::LargeVector<std::uint32_t> timeSlot, cell;
     detail::LargeVector<HiderSample> points;
     ScanlineHider::TileHits hits;
-    detail::LargeVector<RaySurfaceHit> rayHits;
+    RaySurfaceHits rayHits;
     std::vector<RayVolumeSample> volume;
     // Per sample: its transmittance, prepared for the sweep when a pixel
     // first uses it, then shared by every pixel whose filter reaches the

@@ -162,7 +162,7 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
       passing_(detail::rasterTestFinder()),
       tilesX_((width + tileSize - 1) / tileSize),
       tilesY_((height + tileSize - 1) / tileSize) {
-    const detail::LargeVector<Primitive>& primitives = surfaces.all();
+    const auto& primitives = surfaces.all();
     raster_.resize(primitives.size());
     footprints_.resize(primitives.size());
     // Per primitive, its tile rectangle (or none): counted first, then filed.
@@ -289,7 +289,7 @@ void ScanlineHider::tileHits(std::uint32_t tx, std::uint32_t ty, const std::arra
         ys[i] = samples[i].y;
         frame_.screen(samples[i].x, samples[i].y, sxs[i], sys[i]);
     }
-    const detail::LargeVector<Primitive>& primitives = surfaces_.all();
+    const auto& primitives = surfaces_.all();
     const std::size_t end = bucketStart_[tile + 1];
     for (std::size_t e = bucketStart_[tile]; e < end; ++e) {
         // A bucket's primitives lie scattered over the scene's arrays: ask

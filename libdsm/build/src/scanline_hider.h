@@ -56,7 +56,7 @@ public:
         }
         // Found in the order of the primitives, with their samples, then
         // grouped by sample into `hits`.
-        detail::LargeVector<RaySurfaceHit> found;
+        RaySurfaceHits found;
         detail::LargeVector<std::uint32_t> foundSample;
         detail::LargeVector<double> x, y, screenX, screenY;  // the samples' positions side by side
     };

@@ -51,6 +51,9 @@ struct RaySurfaceHit {
     double t;
     std::uint32_t object;
 };
+/// Crossings as ScenePrimitives::intersect() and RayCaster::surfaceHits()
+/// append them: a ray's few, or a whole tile's (on huge pages once large).
+using RaySurfaceHits = detail::LargeVector<RaySurfaceHit>;
 
 /// The crossing as the sampler keeps it: its depth as a float and its
 /// object's opacity (`opacity` holds each object's, by object index).
@@ -118,7 +121,7 @@ public:
     /// shutter time `time` in [0, 1) (the object's motion is undone on the
     /// ray's origin).
     [[gnu::always_inline]] void intersect(const Primitive& p, const Vec3& origin, const Vec3& direction, double time,
-                                          double tMin, detail::LargeVector<RaySurfaceHit>& out) const {
+                                          double tMin, RaySurfaceHits& out) const {
         const Vec3& m = motion_[p.object];
         const Vec3 o = time != 0.0 ? detail::sub(origin, detail::scale(m, time)) : origin;
         switch (p.kind) {
@@ -131,7 +134,7 @@ public:
 
 private:
     void intersectTriangle(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                           detail::LargeVector<RaySurfaceHit>& out) const {
+                           RaySurfaceHits& out) const {
         using namespace detail;
         const Triangle& tri = triangles_[p.index];
         const Vec3 e1 = sub(tri.b, tri.a), e2 = sub(tri.c, tri.a);
@@ -150,7 +153,7 @@ private:
     }
 
     void intersectSphere(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                         detail::LargeVector<RaySurfaceHit>& out) const {
+                         RaySurfaceHits& out) const {
         using namespace detail;
         const Sphere& s = spheres_[p.index];
         const Vec3 o = sub(transformPoint(s.worldToObject, origin), s.centre);
@@ -168,7 +171,7 @@ private:
     }
 
     void intersectQuad(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                       detail::LargeVector<RaySurfaceHit>& out) const {
+                       RaySurfaceHits& out) const {
         using namespace detail;
         const Quad& q = quads_[p.index];
         const Vec3 n = cross(q.u, q.v);
@@ -184,7 +187,7 @@ private:
     // A ribbon facing the ray: a hit where the ray passes the segment's axis
     // closer than its half-width.
     void intersectSegment(const Primitive& p, const Vec3& origin, const Vec3& d, double tMin,
-                          detail::LargeVector<RaySurfaceHit>& out) const {
+                          RaySurfaceHits& out) const {
         using namespace detail;
         const Segment& s = segments_[p.index];
         const Vec3 v = sub(s.p1, s.p0), w0 = sub(origin, s.p0);
