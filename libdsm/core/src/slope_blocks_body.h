@@ -137,7 +137,9 @@ template <int blocks, bool withCounts, bool ownBands, typename T>
     if (!feasibleLanes(nextHi, nextLo, originV, lastDz)) return false;
     hi = nextHi;
     lo = nextLo;
-    for (int b = 0; b < blocks; ++b) addCounts<withCounts>(counts + at + 8 * static_cast<std::size_t>(b), sum);
+    // Without counts, `counts` is null: no pointer is formed from it.
+    if constexpr (withCounts)
+        for (int b = 0; b < blocks; ++b) addCounts<withCounts>(counts + at + 8 * static_cast<std::size_t>(b), sum);
     return true;
 }
 
