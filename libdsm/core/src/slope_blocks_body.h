@@ -108,12 +108,13 @@ template <bool ownBands, typename T>
     return feasibleWindow(greatestLane(lo), leastLane(hi), originV, lastDz);
 }
 
-// The counts of a block of eight vertices, added to four lanes of sums.
+// The counts of the block of eight vertices from `first`, added to four
+// lanes of sums. Without counts, `counts` is null: no pointer is formed from it.
 template <bool withCounts>
-[[gnu::always_inline]] inline void addCounts(const std::uint32_t* counts, Sum4& sum) {
+[[gnu::always_inline]] inline void addCounts(const std::uint32_t* counts, std::size_t first, Sum4& sum) {
     if constexpr (withCounts) {
         Count4 c[2];
-        std::memcpy(c, counts, sizeof c);
+        std::memcpy(c, counts + first, sizeof c);
         sum += __builtin_convertvector(c[0], Sum4) + __builtin_convertvector(c[1], Sum4);
     }
 }
@@ -137,9 +138,7 @@ template <int blocks, bool withCounts, bool ownBands, typename T>
     if (!feasibleLanes(nextHi, nextLo, originV, lastDz)) return false;
     hi = nextHi;
     lo = nextLo;
-    // Without counts, `counts` is null: no pointer is formed from it.
-    if constexpr (withCounts)
-        for (int b = 0; b < blocks; ++b) addCounts<withCounts>(counts + at + 8 * static_cast<std::size_t>(b), sum);
+    for (int b = 0; b < blocks; ++b) addCounts<withCounts>(counts, at + 8 * static_cast<std::size_t>(b), sum);
     return true;
 }
 
