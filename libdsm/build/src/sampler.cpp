@@ -352,11 +352,13 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                 const SampleData& s = samples[i];
                 ws.points[i] = HiderSample{s.x, s.y, s.time};
             }
+            // The hider fills the tile's own hit array, lent to it: one array
+            // of the largest tile's crossings per thread, not two. It keeps
+            // its size from tile to tile, so the hider sets only the slots it
+            // adds.
+            ws.hits.hits.swap(ws.surfaceHits);
             hider->tileHits(tx, ty, pixels, spp, ws.points, camera.nearPlane, objectOpacity, ws.hits);
-            // The hider's hits, grouped by sample, become the tile's (its
-            // vectors trade storage, both kept, and the one handed back keeps
-            // its size: the hider sets only the slots it adds).
-            ws.surfaceHits.swap(ws.hits.hits);
+            ws.hits.hits.swap(ws.surfaceHits);
             for (std::size_t i = 0; i < count; ++i) {
                 samples[i].firstHit = ws.hits.start[i];
                 samples[i].hitCount = ws.hits.start[i + 1] - ws.hits.start[i];
