@@ -2,13 +2,20 @@
 // aligned to 2 MiB in a range marked for huge pages; arrays that grow and
 // shrink across that size keep their contents and free what they allocated
 // the way they allocated it (AddressSanitizer checks the pairing in
-// scripts/test).
+// scripts/test). Arrays for overwrite (detail::LargeVectorForOverwrite) leave
+// their pages unwritten until their elements are.
 #include <gtest/gtest.h>
 
 #include <cstdint>
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
+
+#if defined(__linux__)
+#include <sys/mman.h>
+#include <unistd.h>
+#endif
 
 #include "huge_pages.h"
 
@@ -16,6 +23,7 @@ namespace {
 
 using dsm::detail::kHugePageBytes;
 using dsm::detail::LargeVector;
+using dsm::detail::LargeVectorForOverwrite;
 
 // The VmFlags of the mapping holding `address`, from /proc/self/smaps; empty
 // when there is no such file or mapping.
@@ -64,6 +72,50 @@ TEST(HugePages, ArraysGrowingAndShrinkingAcrossTheSizeKeepTheirContents) {
     copy.resize(n);
     EXPECT_EQ(copy[99], v[99]);
     EXPECT_EQ(copy[n - 1], 0u);
+}
+
+#if defined(__linux__)
+// How many of the pages under [data, data + bytes) are resident.
+std::size_t residentPages(const void* data, std::size_t bytes, std::size_t& pages) {
+    const auto page = static_cast<std::uintptr_t>(sysconf(_SC_PAGESIZE));
+    const auto begin = reinterpret_cast<std::uintptr_t>(data) & ~(page - 1);
+    const auto end = (reinterpret_cast<std::uintptr_t>(data) + bytes + page - 1) & ~(page - 1);
+    pages = (end - begin) / page;
+    std::vector<unsigned char> resident(pages);
+    if (mincore(reinterpret_cast<void*>(begin), end - begin, resident.data()) != 0) return pages;
+    std::size_t n = 0;
+    for (unsigned char r : resident) n += r & 1u;
+    return n;
+}
+#endif
+
+TEST(HugePages, ArraysForOverwriteLeaveTheirPagesUnwrittenUntilTheirElementsAre) {
+    const std::size_t n = 16 * kHugePageBytes / sizeof(std::uint64_t);  // 32 MiB
+    LargeVectorForOverwrite<std::uint64_t> v;
+    v.resize(n);
+    ASSERT_EQ(v.size(), n);
+#if defined(__linux__)
+    std::size_t pages = 0;
+    // A sanitizer's allocator may fill an allocation's first bytes, and a
+    // huge page is resident whole: at most one of the sixteen.
+    const std::size_t unwritten = residentPages(v.data(), n * sizeof(std::uint64_t), pages);
+    ASSERT_GE(pages, 16u);
+    EXPECT_LE(unwritten, pages / 16);
+    // The same resize of an ordinary large array writes every element.
+    LargeVector<std::uint64_t> zeroed;
+    zeroed.resize(n);
+    const std::size_t written = residentPages(zeroed.data(), n * sizeof(std::uint64_t), pages);
+    EXPECT_EQ(written, pages);
+#endif
+    for (std::size_t i = 0; i < n; ++i) v[i] = i * 3;
+    v.resize(n + 1, 5);  // a value given is written
+    v.push_back(9);
+    for (std::size_t i = 0; i < n; i += 4099) ASSERT_EQ(v[i], i * 3) << i;
+    EXPECT_EQ(v[n], 5u);
+    EXPECT_EQ(v[n + 1], 9u);
+    // Types with a constructor are still constructed.
+    LargeVectorForOverwrite<std::string> named(3);
+    EXPECT_TRUE(named[2].empty());
 }
 
 }  // namespace

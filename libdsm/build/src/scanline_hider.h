@@ -81,9 +81,10 @@ private:
     /// no sample's ray can pass the ribbon (radius2 < 0: no such bound, the
     /// exact test decides alone).
     struct SegmentFootprint {
-        double x0 = 0.0, y0 = 0.0, dx = 0.0, dy = 0.0, invLength2 = 0.0, radius2 = -1.0;
-        double invDy = 0.0;  // 1 / dy (0 when dy is), for footprintRow()
+        double x0, y0, dx, dy, invLength2, radius2;
+        double invDy;  // 1 / dy (0 when dy is), for footprintRow()
     };
+    static constexpr SegmentFootprint kNoFootprint{0.0, 0.0, 0.0, 0.0, 0.0, -1.0, 0.0};
 
     static bool footprintRow(const SegmentFootprint& f, double radius, std::uint32_t y, std::uint32_t& x0,
                              std::uint32_t& x1);
@@ -92,8 +93,9 @@ private:
     detail::LightRayFrame frame_;  // the samples' rays
     detail::RasterTestFinder passing_;  // the raster test this processor runs fastest
     std::uint32_t tilesX_ = 0, tilesY_ = 0;
-    detail::LargeVector<RasterBounds> raster_;          // per primitive
-    detail::LargeVector<SegmentFootprint> footprints_;  // per primitive
+    // Per primitive, each written once, by the thread that places it.
+    detail::LargeVectorForOverwrite<RasterBounds> raster_;
+    detail::LargeVectorForOverwrite<SegmentFootprint> footprints_;
     std::vector<std::size_t> bucketStart_;              // per tile, and one past the last
     detail::LargeVector<std::uint32_t> bucketPrimitives_;
 };

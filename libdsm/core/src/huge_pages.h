@@ -13,6 +13,8 @@
 #include <cstdlib>
 #include <limits>
 #include <new>
+#include <type_traits>
+#include <utility>
 #include <vector>
 
 #if defined(__linux__)
@@ -61,5 +63,34 @@ struct HugePageAllocator {
 /// A vector whose storage, once it reaches 2 MiB, lies on huge pages.
 template <class T>
 using LargeVector = std::vector<T, HugePageAllocator<T>>;
+
+/// HugePageAllocator whose elements made without a value are default-
+/// initialised: resize() leaves those of trivial types unwritten.
+template <class T>
+struct HugePageAllocatorForOverwrite : HugePageAllocator<T> {
+    template <class U>
+    struct rebind {
+        using other = HugePageAllocatorForOverwrite<U>;
+    };
+    HugePageAllocatorForOverwrite() noexcept = default;
+    template <class U>
+    HugePageAllocatorForOverwrite(const HugePageAllocatorForOverwrite<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+};
+
+/// A LargeVector for arrays whose every element is written before it is
+/// read, as make_unique_for_overwrite: resizing writes nothing, so that
+/// threads filling parts of the array in parallel are the first to write
+/// their pages (on a virtual machine, a first write of a page is its costly
+/// part), not one thread zeroing it all beforehand.
+template <class T>
+using LargeVectorForOverwrite = std::vector<T, HugePageAllocatorForOverwrite<T>>;
 
 }  // namespace dsm::detail
