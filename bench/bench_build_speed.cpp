@@ -4,7 +4,12 @@
 // change in the machine's load reaches all of them alike.
 //
 // Per round, on the scene at N x N pixels and S samples per pixel:
-//  1. the whole build (`buildMap`, scanline sampler) on one thread and on two;
+//  1. the whole build (`buildMap`, scanline sampler) on one thread and on two,
+//     and on one thread held on each of the first two processors the process
+//     may use: a virtual machine's processors need not be equally fast (on the
+//     2-core AMD EPYC guest the second ran the build about 40 % slower, its
+//     caches slower, while a loop in registers ran alike on both), and two
+//     threads can at best add the two speeds, not double the first's;
 //  2. the whole build with the ray-casting sampler on one thread;
 //  3. Embree all-hit rays (the reference tracer: one rtcOccluded1 call a ray
 //     whose filter records every crossing and lets traversal go on) through
@@ -28,11 +33,16 @@
 #include <cstdlib>
 #include <filesystem>
 #include <random>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
 
 #include <unistd.h>
+
+#if defined(__linux__)
+#include <sched.h>
+#endif
 
 #include "light_rays.h"
 
@@ -94,6 +104,7 @@ std::vector<Ray> sampleRays(const Scene& scene, const Config& cfg) {
 
 struct Round {
     BuildStats scan1, scan2, ray1;
+    BuildStats onProcessor[2];  // one thread held on each of two processors
     double embreeSeconds = 0.0;
     double embreeChecksum = 0.0;
 };
@@ -109,6 +120,37 @@ BuildStats build(const Scene& scene, const Config& cfg, SamplerMethod sampler, u
     fs::remove(path);
     return s;
 }
+
+#if defined(__linux__)
+// The first two processors this process may run on; empty when it may run
+// on fewer.
+std::vector<int> firstTwoProcessors() {
+    cpu_set_t allowed;
+    CPU_ZERO(&allowed);
+    if (sched_getaffinity(0, sizeof allowed, &allowed) != 0) return {};
+    std::vector<int> found;
+    for (int c = 0; c < CPU_SETSIZE && found.size() < 2; ++c)
+        if (CPU_ISSET(c, &allowed)) found.push_back(c);
+    return found.size() == 2 ? found : std::vector<int>{};
+}
+
+// A one-thread build run by this thread (a one-thread build's work stays on
+// the calling thread) held on `processor`; the thread may then run where it
+// could before.
+BuildStats buildOn(int processor, const Scene& scene, const Config& cfg, const std::string& path) {
+    cpu_set_t before, only;
+    CPU_ZERO(&only);
+    CPU_SET(processor, &only);
+    if (sched_getaffinity(0, sizeof before, &before) != 0 || sched_setaffinity(0, sizeof only, &only) != 0)
+        throw std::runtime_error("cannot hold the thread on processor " + std::to_string(processor));
+    const BuildStats s = build(scene, cfg, SamplerMethod::scanline, 1, path);
+    sched_setaffinity(0, sizeof before, &before);
+    return s;
+}
+#else
+std::vector<int> firstTwoProcessors() { return {}; }
+BuildStats buildOn(int, const Scene&, const Config&, const std::string&) { return {}; }
+#endif
 
 double median(std::vector<double> v) {
     std::sort(v.begin(), v.end());
@@ -162,6 +204,7 @@ int main(int argc, char** argv) {
         const std::string path =
             (fs::temp_directory_path() / ("bench_build_speed_" + std::to_string(getpid()) + ".dsm")).string();
 
+        const std::vector<int> processors = firstTwoProcessors();
         std::vector<Round> rounds;
         for (int r = 0; r < cfg.rounds; ++r) {
             Round round;
@@ -173,6 +216,8 @@ int main(int argc, char** argv) {
             round.embreeChecksum = sum / n;
             round.ray1 = build(scene, cfg, SamplerMethod::raytrace, 1, path);
             round.scan2 = build(scene, cfg, SamplerMethod::scanline, 2, path);
+            for (std::size_t k = 0; k < processors.size(); ++k)
+                round.onProcessor[k] = buildOn(processors[k], scene, cfg, path);
             rounds.push_back(round);
         }
 
@@ -210,6 +255,25 @@ int main(int argc, char** argv) {
         row("scanline sampling alone ÷ Embree all-hit rays, 1 thread", samplingRatio);
         row("ray-casting sampler's sampling alone ÷ Embree all-hit rays, 1 thread", raytraceRatio);
         row("scanline build, 2 threads ÷ 1 thread", twoThreads);
+        if (!processors.empty()) {
+            // Two threads against the two processors' one-thread speeds: 1
+            // when the second thread adds all its processor's speed.
+            std::vector<double> slower, ofBoth;
+            std::printf("\nOne thread held on processor %d and on processor %d, M samples/s (same rounds):\n\n"
+                        "| round | processor %d | processor %d | 2 threads |\n|---:|---:|---:|---:|\n",
+                        processors[0], processors[1], processors[0], processors[1]);
+            for (std::size_t r = 0; r < rounds.size(); ++r) {
+                const Round& x = rounds[r];
+                const double a = n / x.onProcessor[0].wallSeconds, b = n / x.onProcessor[1].wallSeconds;
+                const double both = n / x.scan2.wallSeconds;
+                std::printf("| %zu | %.3f | %.3f | %.3f |\n", r + 1, a / 1e6, b / 1e6, both / 1e6);
+                slower.push_back(std::min(a, b) / std::max(a, b));
+                ofBoth.push_back(both / (a + b));
+            }
+            std::printf("\n| ratio (median over rounds; range) | value |\n|---|---:|\n");
+            row("slower processor ÷ faster, one thread", slower);
+            row("2 threads ÷ (sum of the two processors' one-thread speeds)", ofBoth);
+        }
 
         // What the smoke run checks: every program ran over the same samples.
         for (const Round& x : rounds)
