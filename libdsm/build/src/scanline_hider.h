@@ -96,7 +96,7 @@ private:
     // Per primitive, each written once, by the thread that places it.
     detail::LargeVectorForOverwrite<RasterBounds> raster_;
     detail::LargeVectorForOverwrite<SegmentFootprint> footprints_;
-    std::vector<std::size_t> bucketStart_;              // per tile, and one past the last
+    std::vector<std::size_t> bucketStart_;  // per tile, and one past the last
     detail::LargeVector<std::uint32_t> bucketPrimitives_;
 };
 
