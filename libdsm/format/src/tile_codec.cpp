@@ -408,8 +408,12 @@ template <bool Quantised>
     const auto toFloat = [step](std::uint32_t key) {
         // A key of a quantised value is at most 2^24: converted as a signed
         // 32-bit integer, which is one instruction.
-        if constexpr (Quantised) return static_cast<float>(static_cast<std::int32_t>(key)) * step;
-        else return std::bit_cast<float>(key);
+        if constexpr (Quantised) {
+            return static_cast<float>(static_cast<std::int32_t>(key)) * step;
+        } else {
+            (void)step;  // float32 bits need no step
+            return std::bit_cast<float>(key);
+        }
     };
     float* const at = out;
     if (c == 1) {
