@@ -206,11 +206,13 @@ ScanlineHider::ScanlineHider(const ScenePrimitives& surfaces, const LightCamera&
         }
         TileRect& t = rects[i];
         t.any = false;
-        raster_[i] = r;
-        footprints_[i] = kNoFootprint;
+        footprints_[i] = kNoFootprint;  // unless a still segment's is found below
         // Every point of the primitive lies at depth <= near: no crossing
         // has t > near. (The light-space box of the corners bounds it.)
-        if (!inFront) return;
+        if (!inFront) {
+            raster_[i] = r;
+            return;
+        }
         if (behindLight) r = {-kInf, -kInf, kInf, kInf};
         const auto slack = [](double v) { return kRasterSlack * std::max(1.0, std::abs(v)); };
         if (std::isfinite(r.x0)) r.x0 -= slack(r.x0);

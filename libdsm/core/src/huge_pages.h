@@ -14,7 +14,6 @@
 #include <limits>
 #include <new>
 #include <type_traits>
-#include <utility>
 #include <vector>
 
 #if defined(__linux__)
@@ -65,23 +64,16 @@ template <class T>
 using LargeVector = std::vector<T, HugePageAllocator<T>>;
 
 /// HugePageAllocator whose elements made without a value are default-
-/// initialised: resize() leaves those of trivial types unwritten.
+/// initialised: resize() leaves those of trivial types unwritten. Elements
+/// made from values are constructed as std::allocator_traits does by default.
 template <class T>
 struct HugePageAllocatorForOverwrite : HugePageAllocator<T> {
-    template <class U>
-    struct rebind {
-        using other = HugePageAllocatorForOverwrite<U>;
-    };
     HugePageAllocatorForOverwrite() noexcept = default;
     template <class U>
     HugePageAllocatorForOverwrite(const HugePageAllocatorForOverwrite<U>&) noexcept {}
     template <class U>
     void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
         ::new (static_cast<void*>(p)) U;
-    }
-    template <class U, class... Args>
-    void construct(U* p, Args&&... args) {
-        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
     }
 };
 
