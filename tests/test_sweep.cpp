@@ -186,7 +186,7 @@ TEST(Sweep, InputsOfStepsAloneSumInTheHeapsOrderBitForBit) {
             // From a handful of events (sorted by insertion) to hundreds
             // (radix), depths tied on a grid, spread over 2^-6 .. 2^6, all one
             // depth, or a few ulps apart (no radix pass, one, or two and
-            // insertion); bunches of close depths, which differ below the 16 bits
+            // insertion); bunches of close depths, which differ below the 12 bits
             // that the radix passes sort (insertion finishes); or a bunch of
             // a few ulps with one far away, which would make insertion
             // quadratic (an exact radix sort finishes); some weights 0.
