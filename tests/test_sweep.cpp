@@ -387,6 +387,35 @@ TEST(Sweep, RejectsBadWeights) {
     }
 }
 
+// The checks run in one pass without a branch an input; the error still
+// names the first input at fault, its weight before itself, as checking
+// them one after the other would: on functions and on prepared inputs.
+TEST(Sweep, TheFirstFaultIsNamed) {
+    const VisibilityFunction inputs[] = {simple(1), simple(1), simple(3), simple(1)};
+    const double laterBadWeight[] = {1.0, 1.0, 1.0, -2.0};
+    const double earlierBadWeight[] = {1.0, std::numeric_limits<double>::infinity(), 1.0, 1.0};
+    EXPECT_THAT(sweepError(inputs, laterBadWeight, 1), HasSubstr("input 2 has 3 channels"));
+    EXPECT_THAT(sweepError(inputs, earlierBadWeight, 1), HasSubstr("weight inf of input 1"));
+    std::vector<dsm::SweepInput> prepared(std::size(inputs));
+    std::vector<const dsm::SweepInput*> pointers;
+    for (std::size_t k = 0; k < prepared.size(); ++k) {
+        prepared[k].assign(inputs[k]);
+        pointers.push_back(&prepared[k]);
+    }
+    dsm::Sweeper sweeper;
+    dsm::SweptVertices out(1);
+    for (const auto& [weights, expected] :
+         {std::pair{laterBadWeight, "input 2 has 3 channels"}, std::pair{earlierBadWeight, "weight inf of input 1"}}) {
+        try {
+            sweeper.sweep(std::span<const dsm::SweepInput* const>(pointers), std::span<const double>(weights, 4), 1,
+                          out);
+            ADD_FAILURE() << "no error";
+        } catch (const dsm::Error& e) {
+            EXPECT_THAT(e.what(), HasSubstr(expected));
+        }
+    }
+}
+
 TEST(Sweep, RejectsLayeredInputs) {
     VisibilityFunction layered = simple();
     layered.beginLayer();

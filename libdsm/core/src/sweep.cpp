@@ -5,6 +5,7 @@
 #include <cmath>
 #include <functional>
 #include <iterator>
+#include <limits>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -296,25 +297,34 @@ struct Sweeper::Impl {
     std::vector<SweepInput> prepared;
     std::vector<const SweepInput*> preparedInputs;
 
-    // Checks the arguments, calling checkInput(k) for each input after its
-    // weight, and sets w to the normalised weights. False when there are no
-    // inputs (nothing to sweep).
-    template <class CheckInput>
-    bool normaliseWeights(std::size_t n, Span<const double> weights, int channels, CheckInput&& checkInput);
+    // Checks the arguments and sets w to the normalised weights. Calls
+    // inputValid(k) once for each input k, whatever the weights, and on
+    // failure throwIfInvalid(k) for the inputs before the first fault, so
+    // that the error names the first input whose weight or itself is at
+    // fault, as one pass of checks would (a pixel's inputs are checked
+    // without a branch each). False when there are no inputs (nothing to
+    // sweep).
+    template <class InputValid, class ThrowIfInvalid>
+    bool normaliseWeights(std::size_t n, Span<const double> weights, int channels, InputValid&& inputValid,
+                          ThrowIfInvalid&& throwIfInvalid);
 
     // Input is VisibilityFunction or VisibilityView (the same accessors).
     template <class Input>
     std::optional<float> runFunctions(Span<const Input> inputs, Span<const double> weights, int channels,
                                       VertexSink& sink) {
-        const bool any = normaliseWeights(inputs.size(), weights, channels, [&](std::size_t k) {
-            if (inputs[k].channels() != channels)
-                throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", inputs[k].channels(),
-                                                                " channels, expected ", channels));
-            if (inputs[k].layerCount() != 1)
-                throw Error(ErrorCode::argument,
-                            detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
-                                           " layers; the sweep averages single-layer functions"));
-        });
+        const bool any = normaliseWeights(
+            inputs.size(), weights, channels,
+            [&](std::size_t k) { return inputs[k].channels() == channels && inputs[k].layerCount() == 1; },
+            [&](std::size_t k) {
+                if (inputs[k].channels() != channels)
+                    throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ",
+                                                                    inputs[k].channels(), " channels, expected ",
+                                                                    channels));
+                if (inputs[k].layerCount() != 1)
+                    throw Error(ErrorCode::argument,
+                                detail::concat("sweep: input ", k, " has ", inputs[k].layerCount(),
+                                               " layers; the sweep averages single-layer functions"));
+            });
         if (!any) return std::nullopt;
         if (prepared.size() < inputs.size()) prepared.resize(inputs.size());  // never shrunk: each keeps its storage
         preparedInputs.clear();
@@ -332,13 +342,19 @@ struct Sweeper::Impl {
                                      Sink& sink) {
         // What dispatch() needs, gathered in the same pass over the inputs.
         InputScan scan;
-        const bool any = normaliseWeights(inputs.size(), weights, channels, [&](std::size_t k) {
-            const SweepInput& f = *inputs[k];
-            if (f.channels() != channels)
-                throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ", f.channels(),
-                                                                " channels, expected ", channels));
-            scan.add(f);
-        });
+        const bool any = normaliseWeights(
+            inputs.size(), weights, channels,
+            [&](std::size_t k) {
+                const SweepInput& f = *inputs[k];
+                scan.add(f);
+                return f.channels() == channels;
+            },
+            [&](std::size_t k) {
+                if (inputs[k]->channels() != channels)
+                    throw Error(ErrorCode::argument, detail::concat("sweep: input ", k, " has ",
+                                                                    inputs[k]->channels(), " channels, expected ",
+                                                                    channels));
+            });
         if (!any) return std::nullopt;
         return dispatch(inputs, channels, scan, sink);
     }
@@ -413,32 +429,45 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
     return Sweeper().sweep(inputs, weights, channels, sink);
 }
 
-template <class CheckInput>
+template <class InputValid, class ThrowIfInvalid>
 bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, int channels,
-                                     CheckInput&& checkInput) {
+                                     InputValid&& inputValid, ThrowIfInvalid&& throwIfInvalid) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
     if (n != weights.size())
         throw Error(ErrorCode::argument, detail::concat("sweep: ", n, " inputs but ", weights.size(), " weights"));
     if (n > UINT32_MAX) throw Error(ErrorCode::argument, "sweep: too many inputs");
     double weightSum = 0.0;
+    bool valid = true;
     for (std::size_t k = 0; k < n; ++k) {
-        if (!std::isfinite(weights[k]) || weights[k] < 0.0)
-            throw Error(ErrorCode::argument,
-                        detail::concat("sweep: weight ", weights[k], " of input ", k, " is not finite and >= 0"));
-        checkInput(k);
-        weightSum += weights[k];
+        // Finite and >= 0 (NaN fails both comparisons).
+        const double weight = weights[k];
+        valid &= (weight >= 0.0) & (weight <= std::numeric_limits<double>::max()) & inputValid(k);
+        weightSum += weight;
+    }
+    if (!valid) {
+        for (std::size_t k = 0; k < n; ++k) {
+            if (!std::isfinite(weights[k]) || weights[k] < 0.0)
+                throw Error(ErrorCode::argument,
+                            detail::concat("sweep: weight ", weights[k], " of input ", k, " is not finite and >= 0"));
+            throwIfInvalid(k);
+        }
     }
     if (n == 0) return false;
     if (!(weightSum > 0.0) || !std::isfinite(weightSum))
         throw Error(ErrorCode::argument,
                     detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
     w.resize(n);
-    positiveWeights = 0;
+    // Through local pointers and a local count: the member and the vector's
+    // fields would otherwise be read and stored again at every weight.
+    double* normalised = w.data();
+    const double* given = weights.data();
+    std::size_t positive = 0;
     for (std::size_t k = 0; k < n; ++k) {
-        w[k] = weights[k] / weightSum;
-        positiveWeights += w[k] > 0.0;
+        normalised[k] = given[k] / weightSum;
+        positive += normalised[k] > 0.0;
     }
+    positiveWeights = positive;
     return true;
 }
 
