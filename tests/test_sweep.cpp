@@ -515,6 +515,67 @@ TEST(Sweep, ReusedSweeperMatchesFreshSweeps) {
     }
 }
 
+// A SweptVertices holds what a sink is given, bit for bit, whether the
+// inputs are steps alone (written into its arrays directly, with room made
+// ahead) or some slope; after clear() or, without it, after the vertices
+// already held, which stay as they were.
+TEST(Sweep, SweptVerticesHoldWhatASinkIsGiven) {
+    std::mt19937_64 rng(1204);
+    std::uniform_real_distribution<float> depth(0.0f, 8.0f), unit(0.0f, 1.0f);
+    dsm::Sweeper sweeper;
+    dsm::SweptVertices held[2] = {dsm::SweptVertices(1), dsm::SweptVertices(3)};
+    std::vector<dsm::test::RecordingSink::Vertex> expected[2];
+    for (int trial = 0; trial < 60; ++trial) {
+        const int channels = trial % 2 ? 3 : 1;
+        dsm::SweptVertices& out = held[trial % 2];
+        std::vector<dsm::test::RecordingSink::Vertex>& kept = expected[trial % 2];
+        std::vector<VisibilityFunction> inputs;
+        std::vector<double> weights;
+        const std::size_t n = 1 + rng() % (trial % 5 == 0 ? 400 : 60);
+        for (std::size_t k = 0; k < n; ++k) {
+            std::vector<dsm::SurfaceHit> hits(rng() % 6);
+            for (dsm::SurfaceHit& h : hits) {
+                h.z = trial % 3 == 0 ? std::round(4.0f * depth(rng)) / 4.0f : depth(rng);
+                for (float& o : h.opacity) o = unit(rng) < 0.1f ? 1.0f : unit(rng);
+            }
+            inputs.push_back(dsm::transmittance(dsm::SampleRay{hits, {}}, channels, true));
+            weights.push_back(k % 7 == 3 ? 0.0 : 0.1 + static_cast<double>(rng() % 5));
+        }
+        weights[0] = 1.0;
+        if (trial % 4 == 1) {  // one input that slopes: the heap's path
+            VisibilityFunction sloped(channels, true);
+            const float top[3] = {1.0f, 1.0f, 1.0f}, bottom[3] = {0.3f, 0.2f, 0.4f};
+            sloped.append(depth(rng), top, 1);
+            sloped.append(8.0f + depth(rng), bottom, 1);
+            inputs.push_back(sloped);
+            weights.push_back(1.5);
+        }
+        std::vector<dsm::SweepInput> prepared(inputs.size());
+        std::vector<const dsm::SweepInput*> pointers;
+        for (std::size_t k = 0; k < inputs.size(); ++k) {
+            prepared[k].assign(inputs[k]);
+            pointers.push_back(&prepared[k]);
+        }
+        const RecordingSink sink = runSweep(inputs, weights, channels);
+        if (trial % 3 != 2) {
+            out.clear();
+            kept.clear();
+        }
+        EXPECT_FALSE(sweeper.sweep(std::span<const dsm::SweepInput* const>(pointers), weights, channels, out));
+        kept.insert(kept.end(), sink.vertices.begin(), sink.vertices.end());
+        ASSERT_EQ(out.size(), kept.size()) << "trial " << trial;
+        for (std::size_t i = 0; i < kept.size(); ++i) {
+            ASSERT_EQ(std::bit_cast<std::uint32_t>(out.depths()[i]), std::bit_cast<std::uint32_t>(kept[i].z))
+                << "trial " << trial << " vertex " << i;
+            ASSERT_EQ(out.counts()[i], kept[i].count) << "trial " << trial << " vertex " << i;
+            for (std::size_t c = 0; c < static_cast<std::size_t>(channels); ++c)
+                ASSERT_EQ(std::bit_cast<std::uint64_t>(out.values()[i * static_cast<std::size_t>(channels) + c]),
+                          std::bit_cast<std::uint64_t>(kept[i].v[c]))
+                    << "trial " << trial << " vertex " << i << " channel " << c;
+        }
+    }
+}
+
 // Small inputs keep their depths inside the SweepInput, larger ones on the
 // heap: inputs moved after assign() (a vector that grows, a move-assignment
 // over an input of the other kind) still sweep as the functions do.

@@ -7,6 +7,7 @@
 #include <iterator>
 #include <limits>
 #include <memory>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -178,6 +179,24 @@ T* storageFor(std::size_t needed, T* inside, std::size_t room, std::unique_ptr<T
     }
     return heap.get();
 }
+
+// A SweptVertices' arrays as the flat path of the sweep appends to them, with
+// room for every vertex made ahead: the pointers and the size stay in
+// registers, and a vertex costs its stores alone.
+template <std::size_t NC>
+struct DirectVertices {
+    float* z;
+    double* values;
+    std::uint32_t* counts;
+    std::size_t size;
+    bool push(float depth, const double* v, std::uint32_t count) {
+        z[size] = depth;
+        for (std::size_t c = 0; c < NC; ++c) values[size * NC + c] = v[c];
+        counts[size] = count;
+        ++size;
+        return true;
+    }
+};
 
 }  // namespace
 
@@ -417,11 +436,13 @@ std::optional<float> Sweeper::sweep(Span<const SweepInput* const> inputs, Span<c
     return impl_->runPrepared(inputs, weights, channels, out);
 }
 
-void SweptVertices::grow() {
-    const std::size_t capacity = std::max<std::size_t>(64, 2 * z_.size());
-    z_.resize(capacity);
-    v_.resize(capacity * channels_);
-    count_.resize(capacity);
+void SweptVertices::grow() { reserve(std::max<std::size_t>(64, 2 * z_.size())); }
+
+void SweptVertices::reserve(std::size_t vertices) {
+    if (vertices <= z_.size()) return;
+    z_.resize(vertices);
+    v_.resize(vertices * channels_);
+    count_.resize(vertices);
 }
 
 std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const double> weights, int channels,
@@ -473,6 +494,15 @@ bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, 
 
 template <std::size_t NC, bool Sloped, class Sink>
 std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, std::uint64_t events, Sink& sink) {
+    if constexpr (!Sloped && std::is_same_v<Sink, SweptVertices>) {
+        // Each depth emits at most two vertices, and the flat path has at
+        // most `events` depths (fewer than 2^32).
+        sink.reserve(sink.size_ + 2 * events);
+        DirectVertices<NC> direct{sink.z_.data(), sink.v_.data(), sink.count_.data(), sink.size_};
+        const std::optional<float> refused = run<NC, false>(inputs, events, direct);
+        sink.size_ = direct.size;
+        return refused;
+    }
     const std::size_t n = inputs.size();
     constexpr std::size_t nc = NC;
     // Inputs whose current segment slopes (in any channel of positive weight):

@@ -161,8 +161,14 @@ public:
     const std::uint32_t* counts() const { return count_.data(); }
 
 private:
+    // The sweep writes a pixel's vertices into the arrays directly, with room
+    // made ahead for as many as it can emit.
+    friend class Sweeper;
+
     // The arrays are kept at their largest size and written by index.
     void grow();
+    // Room for `vertices` vertices in all (kept: size() is unchanged).
+    void reserve(std::size_t vertices);
 
     std::size_t channels_;
     std::size_t size_ = 0;
