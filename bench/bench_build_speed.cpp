@@ -9,13 +9,16 @@
 //     may use: a virtual machine's processors need not be equally fast (on the
 //     2-core AMD EPYC guest the second ran the build about 40 % slower, its
 //     caches slower, while a loop in registers ran alike on both), and two
-//     threads can at best add the two speeds, not double the first's;
+//     threads can at best add the two speeds, not double the first's; Embree's
+//     rays (3.) are held on each of the two as well, so that the build and
+//     Embree are also compared on the same core;
 //  2. the whole build with the ray-casting sampler on one thread;
 //  3. Embree all-hit rays (the reference tracer: one rtcOccluded1 call a ray
 //     whose filter records every crossing and lets traversal go on) through
 //     the same scene (opaque surfaces traced at opacity 0.999, so that no
-//     crossing ends a ray early: the sampler too finds them all), one ray per map sample (N x N x S rays placed as the
-//     sampler places them: stratified and jittered in each pixel), one thread.
+//     crossing ends a ray early: the sampler too finds them all), one ray per
+//     map sample (N x N x S rays placed as the sampler places them: stratified
+//     and jittered in each pixel), one thread.
 // A build's samples per second count the map's N x N x S samples (not the
 // extra samples tiles cast along their borders), so every rate is over the
 // same number of samples. "Sampling alone" is the build's own sample count
@@ -36,6 +39,8 @@
 #include <stdexcept>
 #include <string>
 #include <thread>
+#include <tuple>
+#include <utility>
 #include <vector>
 
 #include <unistd.h>
@@ -104,7 +109,8 @@ std::vector<Ray> sampleRays(const Scene& scene, const Config& cfg) {
 
 struct Round {
     BuildStats scan1, scan2, ray1;
-    BuildStats onProcessor[2];  // one thread held on each of two processors
+    BuildStats onProcessor[2];        // one thread held on each of two processors
+    double embreeOnProcessor[2] = {};  // Embree's seconds, held on the same two
     double embreeSeconds = 0.0;
     double embreeChecksum = 0.0;
 };
@@ -134,22 +140,26 @@ std::vector<int> firstTwoProcessors() {
     return found.size() == 2 ? found : std::vector<int>{};
 }
 
-// A one-thread build run by this thread (a one-thread build's work stays on
-// the calling thread) held on `processor`; the thread may then run where it
-// could before.
-BuildStats buildOn(int processor, const Scene& scene, const Config& cfg, const std::string& path) {
+// What `work` returns, run by this thread held on `processor` (a one-thread
+// build's work stays on the calling thread, as do Embree's rays here); the
+// thread may then run where it could before.
+template <class Work>
+auto heldOn(int processor, Work&& work) {
     cpu_set_t before, only;
     CPU_ZERO(&only);
     CPU_SET(processor, &only);
     if (sched_getaffinity(0, sizeof before, &before) != 0 || sched_setaffinity(0, sizeof only, &only) != 0)
         throw std::runtime_error("cannot hold the thread on processor " + std::to_string(processor));
-    const BuildStats s = build(scene, cfg, SamplerMethod::scanline, 1, path);
+    const auto result = work();
     sched_setaffinity(0, sizeof before, &before);
-    return s;
+    return result;
 }
 #else
 std::vector<int> firstTwoProcessors() { return {}; }
-BuildStats buildOn(int, const Scene&, const Config&, const std::string&) { return {}; }
+template <class Work>
+auto heldOn(int, Work&& work) {
+    return work();
+}
 #endif
 
 double median(std::vector<double> v) {
@@ -208,16 +218,22 @@ int main(int argc, char** argv) {
         std::vector<Round> rounds;
         for (int r = 0; r < cfg.rounds; ++r) {
             Round round;
+            // Embree's rays on this thread: their seconds and mean transmittance.
+            const auto traceAll = [&] {
+                const auto start = Clock::now();
+                double sum = 0.0;
+                for (const Ray& ray : rays) sum += tracer.transmittance(ray.from, ray.to, ray.time)[0];
+                return std::pair{std::chrono::duration<double>(Clock::now() - start).count(), sum / n};
+            };
             round.scan1 = build(scene, cfg, SamplerMethod::scanline, 1, path);
-            const auto start = Clock::now();
-            double sum = 0.0;
-            for (const Ray& ray : rays) sum += tracer.transmittance(ray.from, ray.to, ray.time)[0];
-            round.embreeSeconds = std::chrono::duration<double>(Clock::now() - start).count();
-            round.embreeChecksum = sum / n;
+            std::tie(round.embreeSeconds, round.embreeChecksum) = traceAll();
             round.ray1 = build(scene, cfg, SamplerMethod::raytrace, 1, path);
             round.scan2 = build(scene, cfg, SamplerMethod::scanline, 2, path);
-            for (std::size_t k = 0; k < processors.size(); ++k)
-                round.onProcessor[k] = buildOn(processors[k], scene, cfg, path);
+            for (std::size_t k = 0; k < processors.size(); ++k) {
+                round.onProcessor[k] =
+                    heldOn(processors[k], [&] { return build(scene, cfg, SamplerMethod::scanline, 1, path); });
+                round.embreeOnProcessor[k] = heldOn(processors[k], traceAll).first;
+            }
             rounds.push_back(round);
         }
 
@@ -258,19 +274,31 @@ int main(int argc, char** argv) {
         if (!processors.empty()) {
             // Two threads against the two processors' one-thread speeds: 1
             // when the second thread adds all its processor's speed.
-            std::vector<double> slower, ofBoth;
-            std::printf("\nOne thread held on processor %d and on processor %d, M samples/s (same rounds):\n\n"
-                        "| round | processor %d | processor %d | 2 threads |\n|---:|---:|---:|---:|\n",
-                        processors[0], processors[1], processors[0], processors[1]);
+            // The build and Embree's rays each held on one processor in turn:
+            // on a machine whose processors differ in speed, and where that
+            // changes over a round, the build ÷ Embree of one processor
+            // compares the two on the same core.
+            std::vector<double> slower, ofBoth, sameProcessor;
+            std::printf("\nOne thread held on processor %d and on processor %d, M samples/s (builds) and M "
+                        "rays/s (Embree), same rounds:\n\n"
+                        "| round | build on %d | Embree on %d | build on %d | Embree on %d | 2 threads |\n"
+                        "|---:|---:|---:|---:|---:|---:|\n",
+                        processors[0], processors[1], processors[0], processors[0], processors[1], processors[1]);
             for (std::size_t r = 0; r < rounds.size(); ++r) {
                 const Round& x = rounds[r];
                 const double a = n / x.onProcessor[0].wallSeconds, b = n / x.onProcessor[1].wallSeconds;
+                const double ea = n / x.embreeOnProcessor[0], eb = n / x.embreeOnProcessor[1];
                 const double both = n / x.scan2.wallSeconds;
-                std::printf("| %zu | %.3f | %.3f | %.3f |\n", r + 1, a / 1e6, b / 1e6, both / 1e6);
+                std::printf("| %zu | %.3f | %.3f | %.3f | %.3f | %.3f |\n", r + 1, a / 1e6, ea / 1e6, b / 1e6,
+                            eb / 1e6, both / 1e6);
                 slower.push_back(std::min(a, b) / std::max(a, b));
                 ofBoth.push_back(both / (a + b));
+                sameProcessor.push_back(a / ea);
+                sameProcessor.push_back(b / eb);
             }
             std::printf("\n| ratio (median over rounds; range) | value |\n|---|---:|\n");
+            row("whole scanline build ÷ Embree all-hit rays, both held on one processor (each of two)",
+                sameProcessor);
             row("slower processor ÷ faster, one thread", slower);
             row("2 threads ÷ (sum of the two processors' one-thread speeds)", ofBoth);
         }
