@@ -300,8 +300,12 @@ std::size_t SweepInput::assignWith(const VisibilityView& f) {
 }
 
 struct Sweeper::Impl {
+    // The weights of the sweep under way, as given (checked) and their sum.
+    // The heap path normalises them into w ahead; the flat path divides
+    // each as it gathers its input's steps, the same division.
+    Span<const double> givenWeights;
+    double weightSum = 0.0;
     std::vector<double> w;
-    std::size_t positiveWeights = 0;  // of w
     std::vector<std::size_t> next;
     std::vector<std::uint32_t> sloped;
     std::vector<std::uint32_t> slopedAt;
@@ -316,7 +320,7 @@ struct Sweeper::Impl {
     std::vector<SweepInput> prepared;
     std::vector<const SweepInput*> preparedInputs;
 
-    // Checks the arguments and sets w to the normalised weights. Calls
+    // Checks the arguments and keeps the weights and their sum. Calls
     // inputValid(k) once for each input k, whatever the weights, and on
     // failure throwIfInvalid(k) for the inputs before the first fault, so
     // that the error names the first input whose weight or itself is at
@@ -324,14 +328,14 @@ struct Sweeper::Impl {
     // without a branch each). False when there are no inputs (nothing to
     // sweep).
     template <class InputValid, class ThrowIfInvalid>
-    bool normaliseWeights(std::size_t n, Span<const double> weights, int channels, InputValid&& inputValid,
-                          ThrowIfInvalid&& throwIfInvalid);
+    bool checkArguments(std::size_t n, Span<const double> weights, int channels, InputValid&& inputValid,
+                        ThrowIfInvalid&& throwIfInvalid);
 
     // Input is VisibilityFunction or VisibilityView (the same accessors).
     template <class Input>
     std::optional<float> runFunctions(Span<const Input> inputs, Span<const double> weights, int channels,
                                       VertexSink& sink) {
-        const bool any = normaliseWeights(
+        const bool any = checkArguments(
             inputs.size(), weights, channels,
             [&](std::size_t k) { return inputs[k].channels() == channels && inputs[k].layerCount() == 1; },
             [&](std::size_t k) {
@@ -361,7 +365,7 @@ struct Sweeper::Impl {
                                      Sink& sink) {
         // What dispatch() needs, gathered in the same pass over the inputs.
         InputScan scan;
-        const bool any = normaliseWeights(
+        const bool any = checkArguments(
             inputs.size(), weights, channels,
             [&](std::size_t k) {
                 const SweepInput& f = *inputs[k];
@@ -401,9 +405,9 @@ struct Sweeper::Impl {
         return sloped ? run<kMaxChannels, true>(inputs, events, sink) : run<kMaxChannels, false>(inputs, events, sink);
     }
 
-    // The sweep proper, over checked inputs with NC channels and weights w,
-    // `events` steps in all. Sink is VertexSink, or a final one whose push()
-    // the compiler calls directly.
+    // The sweep proper, over checked inputs with NC channels and the weights
+    // checkArguments() kept, `events` steps in all. Sink is VertexSink, or a
+    // final one whose push() the compiler calls directly.
     template <std::size_t NC, bool Sloped, class Sink>
     std::optional<float> run(Span<const SweepInput* const> inputs, std::uint64_t events, Sink& sink);
 };
@@ -451,20 +455,20 @@ std::optional<float> sweep(Span<const VisibilityFunction> inputs, Span<const dou
 }
 
 template <class InputValid, class ThrowIfInvalid>
-bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, int channels,
-                                     InputValid&& inputValid, ThrowIfInvalid&& throwIfInvalid) {
+bool Sweeper::Impl::checkArguments(std::size_t n, Span<const double> weights, int channels,
+                                   InputValid&& inputValid, ThrowIfInvalid&& throwIfInvalid) {
     if (channels != 1 && channels != kMaxChannels)
         throw Error(ErrorCode::argument, detail::concat("sweep: channel count ", channels, " is not 1 or 3"));
     if (n != weights.size())
         throw Error(ErrorCode::argument, detail::concat("sweep: ", n, " inputs but ", weights.size(), " weights"));
     if (n > UINT32_MAX) throw Error(ErrorCode::argument, "sweep: too many inputs");
-    double weightSum = 0.0;
+    double sum = 0.0;
     bool valid = true;
     for (std::size_t k = 0; k < n; ++k) {
         // Finite and >= 0 (NaN fails both comparisons).
         const double weight = weights[k];
         valid &= (weight >= 0.0) & (weight <= std::numeric_limits<double>::max()) & inputValid(k);
-        weightSum += weight;
+        sum += weight;
     }
     if (!valid) {
         for (std::size_t k = 0; k < n; ++k) {
@@ -475,20 +479,11 @@ bool Sweeper::Impl::normaliseWeights(std::size_t n, Span<const double> weights, 
         }
     }
     if (n == 0) return false;
-    if (!(weightSum > 0.0) || !std::isfinite(weightSum))
+    if (!(sum > 0.0) || !std::isfinite(sum))
         throw Error(ErrorCode::argument,
-                    detail::concat("sweep: the weights sum to ", weightSum, ", not a positive finite value"));
-    w.resize(n);
-    // Through local pointers and a local count: the member and the vector's
-    // fields would otherwise be read and stored again at every weight.
-    double* normalised = w.data();
-    const double* given = weights.data();
-    std::size_t positive = 0;
-    for (std::size_t k = 0; k < n; ++k) {
-        normalised[k] = given[k] / weightSum;
-        positive += normalised[k] > 0.0;
-    }
-    positiveWeights = positive;
+                    detail::concat("sweep: the weights sum to ", sum, ", not a positive finite value"));
+    givenWeights = weights;
+    weightSum = sum;
     return true;
 }
 
@@ -513,7 +508,7 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
     // when all are, the average is exactly 0 too (blocked light stays blocked,
     // without the rounding residue of the running sum).
     std::size_t zeroCount[kMaxChannels] = {0, 0, 0};
-    const std::size_t positive = positiveWeights;
+    std::size_t positive = 0;  // inputs of positive weight, counted below
 
     double value[kMaxChannels] = {1.0, 1.0, 1.0};
     double outSlope[kMaxChannels] = {0.0, 0.0, 0.0};
@@ -582,6 +577,11 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
     };
 
     if constexpr (Sloped) {
+        w.resize(n);
+        for (std::size_t k = 0; k < n; ++k) {
+            w[k] = givenWeights[k] / weightSum;
+            positive += w[k] > 0.0;
+        }
         // A heap of the inputs' next depths: a sloped input's slope before
         // each depth is the one after its previous depth, so each input is
         // walked in turn.
@@ -660,7 +660,8 @@ std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, st
         std::size_t e = 0;
         for (std::size_t k = 0; k < n; ++k) {
             const SweepInput& f = *inputs[k];
-            const double wk = w[k];
+            const double wk = givenWeights[k] / weightSum;
+            positive += wk > 0.0;
             for (std::size_t i = 0; i < f.size(); ++i, ++e) {
                 SweepInput::Step step = f.step(i);
                 if (!(wk > 0.0)) step.flags = 0;  // only inputs of positive weight count towards 0
