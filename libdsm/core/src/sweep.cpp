@@ -180,7 +180,7 @@ T* storageFor(std::size_t needed, T* inside, std::size_t room, std::unique_ptr<T
     return heap.get();
 }
 
-// A SweptVertices' arrays as the flat path of the sweep appends to them, with
+// A SweptVertices' arrays as the sweep appends to them, with
 // room for every vertex made ahead: the pointers and the size stay in
 // registers, and a vertex costs its stores alone.
 template <std::size_t NC>
@@ -489,12 +489,12 @@ bool Sweeper::Impl::checkArguments(std::size_t n, Span<const double> weights, in
 
 template <std::size_t NC, bool Sloped, class Sink>
 std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, std::uint64_t events, Sink& sink) {
-    if constexpr (!Sloped && std::is_same_v<Sink, SweptVertices>) {
-        // Each depth emits at most two vertices, and the flat path has at
-        // most `events` depths (fewer than 2^32).
+    if constexpr (std::is_same_v<Sink, SweptVertices>) {
+        // Each depth emits at most two vertices, and there are at most
+        // `events` depths: room at most twice the inputs' own steps hold.
         sink.reserve(sink.size_ + 2 * events);
         DirectVertices<NC> direct{sink.z_.data(), sink.v_.data(), sink.count_.data(), sink.size_};
-        const std::optional<float> refused = run<NC, false>(inputs, events, direct);
+        const std::optional<float> refused = run<NC, Sloped>(inputs, events, direct);
         sink.size_ = direct.size;
         return refused;
     }
