@@ -49,19 +49,34 @@ std::size_t tilesInFlight(std::uint32_t tilesX, unsigned threads) { return std::
 
 double since(Clock::time_point start) { return std::chrono::duration<double>(Clock::now() - start).count(); }
 
-// Weight of a sample at offset (dx, dy) pixels from a pixel centre.
-double filterWeight(PixelFilter filter, double radius, double dx, double dy) {
+// Weight of a sample at offset (dx, dy) pixels from a pixel centre, for
+// filter F (a constant, so that the loop over a pixel's samples has no
+// switch in it).
+template <PixelFilter F>
+double filterWeight(double radius, double dx, double dy) {
     const double ax = std::abs(dx), ay = std::abs(dy);
     if (ax >= radius || ay >= radius) return 0.0;
+    if constexpr (F == PixelFilter::Box) return 1.0;
+    if constexpr (F == PixelFilter::Triangle)
+        return detail::triangleWeight(ax, radius) * detail::triangleWeight(ay, radius);
+    if constexpr (F == PixelFilter::Gaussian) return detail::gaussianWeight(dx * dx + dy * dy, radius);
+    return 0.0;
+}
+
+// Calls body(weightOf) with weightOf(dx, dy) the weight of `filter` of
+// half-width `radius`.
+template <class Body>
+void withFilter(PixelFilter filter, double radius, Body&& body) {
     switch (filter) {
         case PixelFilter::Box:
-            return 1.0;
+            return body([radius](double dx, double dy) { return filterWeight<PixelFilter::Box>(radius, dx, dy); });
         case PixelFilter::Triangle:
-            return detail::triangleWeight(ax, radius) * detail::triangleWeight(ay, radius);
+            return body(
+                [radius](double dx, double dy) { return filterWeight<PixelFilter::Triangle>(radius, dx, dy); });
         case PixelFilter::Gaussian:
-            return detail::gaussianWeight(dx * dx + dy * dy, radius);
+            return body(
+                [radius](double dx, double dy) { return filterWeight<PixelFilter::Gaussian>(radius, dx, dy); });
     }
-    return 0.0;
 }
 
 // Everything one sample ray met: its surface hits are
@@ -437,51 +452,56 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             };
             const auto pixelsStart = Clock::now();
             const double timedBefore = timed();
-            for (std::uint32_t y = by0; y < by1; ++y)
-                for (std::uint32_t x = rx0; x < rx1; ++x) {
-                    std::size_t used = 0;  // the pixel's inputs so far
-                    const double cx = x + 0.5, cy = y + 0.5;
-                    for (std::uint32_t ny = (y >= std::uint32_t(reach) ? y - reach : 0); ny < std::min(y + reach + 1, H); ++ny)
-                        for (std::uint32_t nx = (x >= std::uint32_t(reach) ? x - reach : 0); nx < std::min(x + reach + 1, W);
-                             ++nx) {
-                            const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
-                            for (std::size_t i = first; i < first + spp; ++i) {
-                                const SampleData& s = samples[i];
-                                const double wgt = filterWeight(filter, radius, s.x - cx, s.y - cy);
-                                if (wgt <= 0.0) continue;
-                                // The ray's fields stored where they go: a copy of a
-                                // ray assembled on the stack read it back whole before
-                                // its halves had been written (a stalled store).
-                                SampleRay& ray = ws.rays[used];
-                                ray.hits = ws.hitsOf(s);
-                                ray.volume = s.volume;
-                                if (!ws.built[i]) {
-                                    try {
-                                        ws.transmittance.build(ray, channels, counts, kFromTheStart,
-                                                               ws.transmittances[i]);
-                                    } catch (const Error& e) {
-                                        throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ", used,
-                                                                     ": ", e.what()));
+            withFilter(filter, radius, [&](auto weightOf) {
+                for (std::uint32_t y = by0; y < by1; ++y)
+                    for (std::uint32_t x = rx0; x < rx1; ++x) {
+                        std::size_t used = 0;  // the pixel's inputs so far
+                        const double cx = x + 0.5, cy = y + 0.5;
+                        // The sample pixels [nx0, nx1) x [ny0, ny1) whose samples can reach it.
+                        const std::uint32_t nx0 = x >= std::uint32_t(reach) ? x - reach : 0;
+                        const std::uint32_t ny0 = y >= std::uint32_t(reach) ? y - reach : 0;
+                        const std::uint32_t nx1 = std::min(x + reach + 1, W), ny1 = std::min(y + reach + 1, H);
+                        for (std::uint32_t ny = ny0; ny < ny1; ++ny)
+                            for (std::uint32_t nx = nx0; nx < nx1; ++nx) {
+                                const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
+                                for (std::size_t i = first; i < first + spp; ++i) {
+                                    const SampleData& s = samples[i];
+                                    const double wgt = weightOf(s.x - cx, s.y - cy);
+                                    if (wgt <= 0.0) continue;
+                                    // The ray's fields stored where they go: a copy of a
+                                    // ray assembled on the stack read it back whole before
+                                    // its halves had been written (a stalled store).
+                                    SampleRay& ray = ws.rays[used];
+                                    ray.hits = ws.hitsOf(s);
+                                    ray.volume = s.volume;
+                                    if (!ws.built[i]) {
+                                        try {
+                                            ws.transmittance.build(ray, channels, counts, kFromTheStart,
+                                                                   ws.transmittances[i]);
+                                        } catch (const Error& e) {
+                                            throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ", used,
+                                                                         ": ", e.what()));
+                                        }
+                                        ws.built[i] = 1;
                                     }
-                                    ws.built[i] = 1;
+                                    ws.inputs[used] = &ws.transmittances[i];
+                                    ws.weights[used] = wgt;
+                                    ++used;
                                 }
-                                ws.inputs[used] = &ws.transmittances[i];
-                                ws.weights[used] = wgt;
-                                ++used;
                             }
+                        VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
+                        if (used == 0) continue;  // a filter too narrow to catch a sample
+                        try {
+                            ws.pixel.build(Span<const SweepInput* const>(ws.inputs.data(), used),
+                                           Span<const SampleRay>(ws.rays.data(), used),
+                                           Span<const double>(ws.weights.data(), used), f, &stats.timings);
+                        } catch (const Error& e) {
+                            throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                         }
-                    VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
-                    if (used == 0) continue;  // a filter too narrow to catch a sample
-                    try {
-                        ws.pixel.build(Span<const SweepInput* const>(ws.inputs.data(), used),
-                                       Span<const SampleRay>(ws.rays.data(), used),
-                                       Span<const double>(ws.weights.data(), used), f, &stats.timings);
-                    } catch (const Error& e) {
-                        throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
+                        stats.vertices += f.size();
+                        stats.maxVertices = std::max(stats.maxVertices, static_cast<std::uint32_t>(f.size()));
                     }
-                    stats.vertices += f.size();
-                    stats.maxVertices = std::max(stats.maxVertices, static_cast<std::uint32_t>(f.size()));
-                }
+            });
             stats.timings.transmittanceSeconds += since(pixelsStart) - (timed() - timedBefore);
         }
     };
