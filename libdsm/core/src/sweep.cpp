@@ -110,8 +110,12 @@ std::uint64_t* radixSortByDepth(std::uint64_t* keys, std::uint64_t* scratch, std
 bool insertionSortWithin(std::uint64_t* keys, std::size_t n, std::size_t budget) {
     for (std::size_t i = 1; i < n; ++i) {
         const std::uint64_t key = keys[i];
+        if (!(key < keys[i - 1])) continue;  // most keys are in place already: one comparison
         std::size_t j = i;
-        for (; j > 0 && key < keys[j - 1]; --j) keys[j] = keys[j - 1];
+        do {
+            keys[j] = keys[j - 1];
+            --j;
+        } while (j > 0 && key < keys[j - 1]);
         keys[j] = key;
         const std::size_t moved = i - j;
         if (moved > budget) return false;
