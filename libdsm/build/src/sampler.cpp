@@ -452,6 +452,14 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             };
             const auto pixelsStart = Clock::now();
             const double timedBefore = timed();
+            // The workspace's arrays through pointers read once: none is resized
+            // in the loop, and stores of pointers into `inputs` would otherwise
+            // make the compiler read the vectors' own pointers again.
+            SampleRay* const rays = ws.rays.data();
+            const SweepInput** const inputs = ws.inputs.data();
+            double* const weights = ws.weights.data();
+            unsigned char* const built = ws.built.data();
+            SweepInput* const transmittances = ws.transmittances.data();
             withFilter(filter, radius, [&](auto weightOf) {
                 for (std::uint32_t y = by0; y < by1; ++y)
                     for (std::uint32_t x = rx0; x < rx1; ++x) {
@@ -471,30 +479,29 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                                     // The ray's fields stored where they go: a copy of a
                                     // ray assembled on the stack read it back whole before
                                     // its halves had been written (a stalled store).
-                                    SampleRay& ray = ws.rays[used];
+                                    SampleRay& ray = rays[used];
                                     ray.hits = ws.hitsOf(s);
                                     ray.volume = s.volume;
-                                    if (!ws.built[i]) {
+                                    if (!built[i]) {
                                         try {
                                             ws.transmittance.build(ray, channels, counts, kFromTheStart,
-                                                                   ws.transmittances[i]);
+                                                                   transmittances[i]);
                                         } catch (const Error& e) {
                                             throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ray ", used,
                                                                          ": ", e.what()));
                                         }
-                                        ws.built[i] = 1;
+                                        built[i] = 1;
                                     }
-                                    ws.inputs[used] = &ws.transmittances[i];
-                                    ws.weights[used] = wgt;
+                                    inputs[used] = &transmittances[i];
+                                    weights[used] = wgt;
                                     ++used;
                                 }
                             }
                         VisibilityFunction& f = pixels[std::size_t(y - y0) * (x1 - x0) + (x - x0)];
                         if (used == 0) continue;  // a filter too narrow to catch a sample
                         try {
-                            ws.pixel.build(Span<const SweepInput* const>(ws.inputs.data(), used),
-                                           Span<const SampleRay>(ws.rays.data(), used),
-                                           Span<const double>(ws.weights.data(), used), f, &stats.timings);
+                            ws.pixel.build(Span<const SweepInput* const>(inputs, used), Span<const SampleRay>(rays, used),
+                                           Span<const double>(weights, used), f, &stats.timings);
                         } catch (const Error& e) {
                             throw Error(e.code(), concat(where, ": pixel ", x, ",", y, ": ", e.what()));
                         }
