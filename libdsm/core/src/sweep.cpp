@@ -184,9 +184,9 @@ T* storageFor(std::size_t needed, T* inside, std::size_t room, std::unique_ptr<T
     return heap.get();
 }
 
-// A SweptVertices' arrays as the sweep appends to them, with
-// room for every vertex made ahead: the pointers and the size stay in
-// registers, and a vertex costs its stores alone.
+// A SweptVertices' arrays as the sweep appends to them, with room for every
+// vertex made ahead: the pointers and the size stay in registers, and a
+// vertex costs its stores alone.
 template <std::size_t NC>
 struct DirectVertices {
     float* z;
@@ -495,7 +495,7 @@ template <std::size_t NC, bool Sloped, class Sink>
 std::optional<float> Sweeper::Impl::run(Span<const SweepInput* const> inputs, std::uint64_t events, Sink& sink) {
     if constexpr (std::is_same_v<Sink, SweptVertices>) {
         // Each depth emits at most two vertices, and there are at most
-        // `events` depths: room at most twice the inputs' own steps hold.
+        // `events` depths (the inputs' steps, all told).
         sink.reserve(sink.size_ + 2 * events);
         DirectVertices<NC> direct{sink.z_.data(), sink.v_.data(), sink.count_.data(), sink.size_};
         const std::optional<float> refused = run<NC, Sloped>(inputs, events, direct);

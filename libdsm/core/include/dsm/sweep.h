@@ -133,7 +133,9 @@ private:
 /// The sweep's output kept as it comes, values in double precision, for a
 /// caller that hands it on after the sweep (to a compressor, timed apart).
 /// Sweeping into it (the Sweeper overload) stores each vertex without a
-/// virtual call. Keeps its storage from one clear() to the next.
+/// virtual call, after making room for two vertices per step of the inputs
+/// (the most a sweep can emit; about the memory the inputs take). Keeps its
+/// storage from one clear() to the next.
 class DSM_API SweptVertices final : public VertexSink {
 public:
     /// Vertices of `channels` (1 or 3) values.
