@@ -469,9 +469,11 @@ bool Sweeper::Impl::checkArguments(std::size_t n, Span<const double> weights, in
     double sum = 0.0;
     bool valid = true;
     for (std::size_t k = 0; k < n; ++k) {
-        // Finite and >= 0 (NaN fails both comparisons).
+        // Finite and >= 0 (NaN fails both comparisons); the input checked
+        // whatever its weight.
         const double weight = weights[k];
-        valid &= (weight >= 0.0) & (weight <= std::numeric_limits<double>::max()) & inputValid(k);
+        const bool inputOk = inputValid(k);
+        valid &= (weight >= 0.0) & (weight <= std::numeric_limits<double>::max()) & inputOk;
         sum += weight;
     }
     if (!valid) {
