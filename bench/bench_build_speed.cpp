@@ -215,16 +215,16 @@ int main(int argc, char** argv) {
             (fs::temp_directory_path() / ("bench_build_speed_" + std::to_string(getpid()) + ".dsm")).string();
 
         const std::vector<int> processors = firstTwoProcessors();
+        // Embree's rays on this thread: their seconds and mean transmittance.
+        const auto traceAll = [&] {
+            const auto start = Clock::now();
+            double sum = 0.0;
+            for (const Ray& ray : rays) sum += tracer.transmittance(ray.from, ray.to, ray.time)[0];
+            return std::pair{std::chrono::duration<double>(Clock::now() - start).count(), sum / n};
+        };
         std::vector<Round> rounds;
         for (int r = 0; r < cfg.rounds; ++r) {
             Round round;
-            // Embree's rays on this thread: their seconds and mean transmittance.
-            const auto traceAll = [&] {
-                const auto start = Clock::now();
-                double sum = 0.0;
-                for (const Ray& ray : rays) sum += tracer.transmittance(ray.from, ray.to, ray.time)[0];
-                return std::pair{std::chrono::duration<double>(Clock::now() - start).count(), sum / n};
-            };
             round.scan1 = build(scene, cfg, SamplerMethod::scanline, 1, path);
             std::tie(round.embreeSeconds, round.embreeChecksum) = traceAll();
             round.ray1 = build(scene, cfg, SamplerMethod::raytrace, 1, path);

@@ -326,11 +326,11 @@ struct Sweeper::Impl {
 
     // Checks the arguments and keeps the weights and their sum. Calls
     // inputValid(k) once for each input k, whatever the weights, and on
-    // failure throwIfInvalid(k) for the inputs before the first fault, so
-    // that the error names the first input whose weight or itself is at
-    // fault, as one pass of checks would (a pixel's inputs are checked
-    // without a branch each). False when there are no inputs (nothing to
-    // sweep).
+    // failure checks again in input order, each weight and then
+    // throwIfInvalid(k), so that the error names the first input whose
+    // weight or itself is at fault, as one pass of checks would (a pixel's
+    // inputs are checked without a branch each). False when there are no
+    // inputs (nothing to sweep).
     template <class InputValid, class ThrowIfInvalid>
     bool checkArguments(std::size_t n, Span<const double> weights, int channels, InputValid&& inputValid,
                         ThrowIfInvalid&& throwIfInvalid);
