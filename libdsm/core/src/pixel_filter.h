@@ -8,6 +8,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "exponential.h"
+
 namespace dsm::detail {
 
 /// Triangle (tent): 1 at the centre, falling linearly to 0 at distance r.
@@ -17,7 +19,7 @@ inline double triangleWeight(double d, double r) { return std::max(0.0, 1.0 - st
 /// or the sum over both for a radial weight).
 inline double gaussianWeight(double d2, double r) {
     const double s = 0.5 * r;
-    return std::exp(-d2 / (2.0 * s * s));
+    return exponential(-d2 / (2.0 * s * s));
 }
 
 }  // namespace dsm::detail
