@@ -17,6 +17,7 @@
 
 #include "dsm/error.h"
 #include "insertion_sort.h"
+#include "key_sort.h"
 #include "text.h"
 
 DSM_NAMESPACE_BEGIN
@@ -138,12 +139,20 @@ bool insertionSortWithin(std::uint64_t* keys, std::size_t n, std::size_t budget)
 // third pass). Keys bunched in a few values of those bits would make
 // insertion quadratic: past a budget of moves, an exact radix sort of the
 // keys as they are finishes instead. Few comparisons that a processor could
-// mispredict, unlike the heap's.
+// mispredict, unlike the heap's. Where the processor has AVX-512, runs of
+// up to kVectorSortLimit keys go to a bitonic sort in its registers instead
+// (key_sort.h): the same order, in about 60 % of the time over the hair
+// ball's pixels.
 std::uint64_t* sortEvents(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
     constexpr std::size_t kInsertionLimit = 24;
     constexpr std::size_t kMovesPerKey = 4;
     if (n <= kInsertionLimit) {
         detail::insertionSort(keys, n, std::less<>());
+        return keys;
+    }
+    static const detail::VectorKeySort vectorSort = detail::avx512KeySort();
+    if (vectorSort != nullptr && n <= detail::kVectorSortLimit) {
+        vectorSort(keys, n);
         return keys;
     }
     const std::uint32_t first = depthOf(keys[0]);
