@@ -1,5 +1,5 @@
-// The bitonic sort of key_sort.h, compiled for AVX-512 (this file alone is
-// built with -mavx512f; key_sort.cpp hands it out only on processors that
+// The bitonic sort of event_keys.h, compiled for AVX-512 (this file alone is
+// built with -mavx512f; event_keys.cpp hands it out only on processors that
 // have it). The keys are padded with the largest key to 8 * 2^m, held as
 // vectors of eight lanes: each vector is sorted by a network inside it, then
 // sorted runs of vectors are merged pairwise, the second run reversed so that
@@ -19,7 +19,7 @@
 #include <cstdint>
 #include <limits>
 
-#include "key_sort.h"
+#include "event_keys.h"
 
 namespace dsm::detail {
 
