@@ -1,7 +1,6 @@
 #include "dsm/sweep.h"
 
 #include <algorithm>
-#include <bit>
 #include <cmath>
 #include <functional>
 #include <iterator>
