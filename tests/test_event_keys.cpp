@@ -13,7 +13,6 @@
 #include <functional>
 #include <limits>
 #include <random>
-#include <string>
 #include <vector>
 
 #include "event_keys.h"
