@@ -3,8 +3,9 @@
 // keys (numbered in array order, as the sweep makes them) in the order
 // std::sort does, for every count to past the vector sort's limit, over
 // depths close together, spread out, few, one, extreme, in order and
-// reversed; the AVX-512 sort does so for any keys (random, repeated, the
-// extremes, in order, reversed); and event keys order depths as floats do.
+// reversed; the AVX-512 and AVX2 sorts do so for any keys (random, repeated,
+// the extremes, in order, reversed); the dispatch prefers the wider vectors;
+// and event keys order depths as floats do.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -119,15 +120,41 @@ TEST(EventKeys, DispatchSortsAsStdSort) {
     expectEventKeysSortedAsStdSort(withScratch(&dsm::detail::sortEventKeys), kVectorSortLimit + 300);
 }
 
-TEST(EventKeys, Avx512SortsAsStdSort) {
-    const dsm::detail::VectorKeySort sort = dsm::detail::avx512KeySort();
-    if (sort == nullptr) GTEST_SKIP() << "no AVX-512 in this build or on this processor";
-    const Sort inPlace = [sort](std::vector<std::uint64_t> keys) {
-        sort(keys.data(), keys.size());
+// A vector sort, for any keys up to kVectorSortLimit and event keys up to
+// the same, past the limit of runs the sweep gives it.
+void expectVectorSortSortsAsStdSort(const dsm::detail::VectorKeySort& vector) {
+    ASSERT_GT(vector.limit, 0u);
+    ASSERT_LE(vector.limit, kVectorSortLimit);
+    const Sort inPlace = [&vector](std::vector<std::uint64_t> keys) {
+        vector.sort(keys.data(), keys.size());
         return keys;
     };
     expectAnyKeysSortedAsStdSort(inPlace, kVectorSortLimit);
     expectEventKeysSortedAsStdSort(inPlace, kVectorSortLimit);
+}
+
+TEST(EventKeys, Avx512SortsAsStdSort) {
+    const dsm::detail::VectorKeySort vector = dsm::detail::avx512KeySort();
+    if (vector.sort == nullptr) GTEST_SKIP() << "no AVX-512 in this build or on this processor";
+    expectVectorSortSortsAsStdSort(vector);
+}
+
+TEST(EventKeys, Avx2SortsAsStdSort) {
+    const dsm::detail::VectorKeySort vector = dsm::detail::avx2KeySort();
+    if (vector.sort == nullptr) GTEST_SKIP() << "no AVX2 in this build or on this processor";
+    expectVectorSortSortsAsStdSort(vector);
+}
+
+// The sweep's choice: the widest vectors the processor has.
+TEST(EventKeys, DispatchPrefersAvx512ThenAvx2) {
+    const dsm::detail::VectorKeySort chosen = dsm::detail::vectorKeySort();
+    const dsm::detail::VectorKeySort avx512 = dsm::detail::avx512KeySort(), avx2 = dsm::detail::avx2KeySort();
+    const dsm::detail::VectorKeySort expected = avx512.sort != nullptr ? avx512 : avx2;
+    EXPECT_EQ(chosen.sort, expected.sort);
+    EXPECT_EQ(chosen.limit, expected.limit);
+    if (chosen.sort == nullptr) {
+        EXPECT_EQ(chosen.limit, 0u);
+    }
 }
 
 TEST(EventKeys, OrderDepthsAsFloatsAndTiesByIndex) {
@@ -136,8 +163,8 @@ TEST(EventKeys, OrderDepthsAsFloatsAndTiesByIndex) {
     for (std::size_t a = 0; a < std::size(depths); ++a)
         for (std::size_t b = 0; b < std::size(depths); ++b) {
             const bool floatsBefore = depths[a] < depths[b] || (depths[a] == depths[b] && a < b);
-            EXPECT_EQ(eventKey(depths[a], static_cast<std::uint32_t>(a)) < eventKey(depths[b], static_cast<std::uint32_t>(b)),
-                      floatsBefore)
+            const auto keyOf = [&](std::size_t i) { return eventKey(depths[i], static_cast<std::uint32_t>(i)); };
+            EXPECT_EQ(keyOf(a) < keyOf(b), floatsBefore)
                 << depths[a] << " (" << a << ") against " << depths[b] << " (" << b << ")";
         }
 }

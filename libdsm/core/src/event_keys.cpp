@@ -115,28 +115,43 @@ std::uint64_t* sortEventKeysWithoutVectors(std::uint64_t* keys, std::uint64_t* s
     return width <= 24 ? radixSortByDepth<3>(sorted, other, n, 0) : radixSortByDepth<4>(sorted, other, n, 0);
 }
 
-// Where the processor has AVX-512, runs of up to kVectorSortLimit keys go to
-// a bitonic sort in its registers instead: the same order (the keys are
-// distinct), in about 60 % of the time over the hair ball's pixels.
+// Where the processor has AVX-512 or AVX2, runs of up to the vector sort's
+// limit go to a bitonic sort in its registers instead: the same order (the
+// keys are distinct), in about 60 % of the time over the hair ball's pixels
+// with AVX-512 and 83 % with AVX2.
 std::uint64_t* sortEventKeys(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n) {
-    static const VectorKeySort vectorSort = avx512KeySort();
-    if (vectorSort != nullptr && n > kInsertionLimit && n <= kVectorSortLimit) {
-        vectorSort(keys, n);
+    static const VectorKeySort vectorSort = vectorKeySort();
+    if (n > kInsertionLimit && n <= vectorSort.limit) {
+        vectorSort.sort(keys, n);
         return keys;
     }
     return sortEventKeysWithoutVectors(keys, scratch, n);
 }
 
-#ifdef DSM_KEY_SORT_AVX512
+#ifdef DSM_KEY_SORT_VECTORS
 void sortKeysAvx512(std::uint64_t* keys, std::size_t n);  // event_keys_avx512.cpp
+void sortKeysAvx2(std::uint64_t* keys, std::size_t n);    // event_keys_avx2.cpp
 #endif
 
 VectorKeySort avx512KeySort() {
-#ifdef DSM_KEY_SORT_AVX512
+#ifdef DSM_KEY_SORT_VECTORS
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx512f")) return &sortKeysAvx512;
+    if (__builtin_cpu_supports("avx512f")) return {&sortKeysAvx512, kVectorSortLimit};
 #endif
-    return nullptr;
+    return {};
+}
+
+VectorKeySort avx2KeySort() {
+#ifdef DSM_KEY_SORT_VECTORS
+    __builtin_cpu_init();
+    if (__builtin_cpu_supports("avx2")) return {&sortKeysAvx2, 128};
+#endif
+    return {};
+}
+
+VectorKeySort vectorKeySort() {
+    const VectorKeySort avx512 = avx512KeySort();
+    return avx512.sort != nullptr ? avx512 : avx2KeySort();
 }
 
 }  // namespace dsm::detail

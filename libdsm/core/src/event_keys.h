@@ -30,25 +30,36 @@ inline std::uint32_t inputOf(std::uint64_t key) { return static_cast<std::uint32
 /// scratch, room for n each). Each keys[i] must hold i in its low 32 bits
 /// (events numbered in array order, as the sweep makes them): the radix sort
 /// orders by depth alone, keeping ties in array order. Vector instructions
-/// where the processor has them (avx512KeySort()), else
+/// where the processor has them (vectorKeySort()), else
 /// sortEventKeysWithoutVectors().
 DSM_TESTED_INTERNAL std::uint64_t* sortEventKeys(std::uint64_t* keys, std::uint64_t* scratch, std::size_t n);
 
 /// The same, with the same precondition, by insertion and radix sorts alone:
-/// on processors without AVX-512, for runs longer than kVectorSortLimit, and
-/// in tests.
+/// on processors without AVX2, for runs longer than the vector sort's limit,
+/// and in tests.
 DSM_TESTED_INTERNAL std::uint64_t* sortEventKeysWithoutVectors(std::uint64_t* keys, std::uint64_t* scratch,
                                                                std::size_t n);
 
-/// The most keys the vector sort takes at once: beyond about 512 a bitonic
-/// network's log^2 n steps cost more than the radix sort's passes.
+/// The most keys a vector sort takes at once.
 inline constexpr std::size_t kVectorSortLimit = 512;
 
-/// Sorts any keys[0, n) in ascending order, for 0 < n <= kVectorSortLimit.
-using VectorKeySort = void (*)(std::uint64_t* keys, std::size_t n);
+/// A bitonic sort in vector registers (bitonic_key_sort.h): `sort` puts any
+/// keys[0, n) in ascending order, for 0 < n <= kVectorSortLimit, and the sweep
+/// gives it runs of up to `limit` keys, beyond which its log^2 n steps cost
+/// more than the radix sort's passes (over the hair ball's pixels: 512 keys
+/// with AVX-512's eight lanes, 128 with AVX2's four). No sort, and a limit of
+/// 0, where this build or the processor lacks the instructions.
+struct VectorKeySort {
+    void (*sort)(std::uint64_t* keys, std::size_t n) = nullptr;
+    std::size_t limit = 0;
+};
 
-/// The AVX-512 sort (a bitonic network, event_keys_avx512.cpp) where this
-/// build has it and the processor runs it; null otherwise.
+/// The sorts for AVX-512 (event_keys_avx512.cpp) and AVX2 (event_keys_avx2.cpp).
 DSM_TESTED_INTERNAL VectorKeySort avx512KeySort();
+DSM_TESTED_INTERNAL VectorKeySort avx2KeySort();
+
+/// The sort sortEventKeys() uses: AVX-512's where the processor has it, else
+/// AVX2's, else none.
+DSM_TESTED_INTERNAL VectorKeySort vectorKeySort();
 
 }  // namespace dsm::detail
