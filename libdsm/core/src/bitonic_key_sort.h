@@ -28,16 +28,6 @@
 namespace dsm::detail {
 namespace {
 
-// The lanes that keep the larger of themselves and their partner at distance
-// j, in blocks of k lanes sorted alternately up and down (a bitonic sort's
-// step): the upper lane of a pair in a rising block, the lower in a falling one.
-constexpr unsigned takesLarger(unsigned lanes, unsigned k, unsigned j) {
-    unsigned mask = 0;
-    for (unsigned lane = 0; lane < lanes; ++lane)
-        if (((lane & j) != 0) != ((lane & k) != 0)) mask |= 1u << lane;
-    return mask;
-}
-
 // Calls f on the vectors a[0, Count) two at a time (one and a copy, if only one).
 template <std::size_t Count, class Vector, class F>
 void eachPair(Vector* a, F&& f) {

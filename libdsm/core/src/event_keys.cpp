@@ -16,6 +16,10 @@ namespace {
 // Runs this short are sorted by insertion (the keys are distinct).
 constexpr std::size_t kInsertionLimit = 24;
 
+// The longest runs the sweep gives the AVX2 sort: with four keys a vector it
+// lost to the radix sort from 257 keys on, over the hair ball's pixels.
+constexpr std::size_t kAvx2SortLimit = 128;
+
 // Turns the counts of `digits` digits (a multiple of 4) into where each
 // digit's keys start (an exclusive prefix sum). A pixel sorts about a hundred
 // keys, so these additions are much of a pass: with SSE2, four digits at a
@@ -144,7 +148,7 @@ VectorKeySort avx512KeySort() {
 VectorKeySort avx2KeySort() {
 #ifdef DSM_KEY_SORT_VECTORS
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2")) return {&sortKeysAvx2, 128};
+    if (__builtin_cpu_supports("avx2")) return {&sortKeysAvx2, kAvx2SortLimit};
 #endif
     return {};
 }

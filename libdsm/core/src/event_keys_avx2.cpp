@@ -2,7 +2,8 @@
 // a vector. AVX2 compares 64-bit integers as signed only, so the keys are
 // held with their top bit flipped, which turns their unsigned order into the
 // signed one. This file alone is built with -mavx2; event_keys.cpp hands it
-// out only on processors that have AVX2 and not AVX-512.
+// out only on processors that have AVX2, and the sweep takes it where they
+// lack AVX-512.
 #include <immintrin.h>
 
 #include <cstddef>

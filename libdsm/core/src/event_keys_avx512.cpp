@@ -21,6 +21,16 @@ namespace dsm::detail {
 
 namespace {
 
+// The lanes that keep the larger of themselves and their partner at distance
+// j, in blocks of k lanes sorted alternately up and down (a bitonic sort's
+// step): the upper lane of a pair in a rising block, the lower in a falling one.
+constexpr unsigned takesLarger(unsigned lanes, unsigned k, unsigned j) {
+    unsigned mask = 0;
+    for (unsigned lane = 0; lane < lanes; ++lane)
+        if (((lane & j) != 0) != ((lane & k) != 0)) mask |= 1u << lane;
+    return mask;
+}
+
 struct Avx512Lanes {
     using Vector = __m512i;
     static constexpr std::size_t kLanes = 8;
