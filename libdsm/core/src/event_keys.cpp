@@ -16,11 +16,6 @@ namespace {
 // Runs this short are sorted by insertion (the keys are distinct).
 constexpr std::size_t kInsertionLimit = 24;
 
-// The longest runs the sweep gives the AVX2 sort: with four keys a vector it
-// lost to the radix sort from 257 keys on over the hair ball's pixels, and a
-// limit of 256 gained nothing in all.
-constexpr std::size_t kAvx2SortLimit = 128;
-
 // Turns the counts of `digits` digits (a multiple of 4) into where each
 // digit's keys start (an exclusive prefix sum). A pixel sorts about a hundred
 // keys, so these additions are much of a pass: with SSE2, four digits at a
@@ -136,23 +131,24 @@ std::uint64_t* sortEventKeys(std::uint64_t* keys, std::uint64_t* scratch, std::s
 #ifdef DSM_KEY_SORT_VECTORS
 void sortKeysAvx512(std::uint64_t* keys, std::size_t n);  // event_keys_avx512.cpp
 void sortKeysAvx2(std::uint64_t* keys, std::size_t n);    // event_keys_avx2.cpp
-#endif
+
+// The longest runs the sweep gives the AVX2 sort: with four keys a vector it
+// lost to the radix sort from 257 keys on over the hair ball's pixels, and a
+// limit of 256 gained nothing in all.
+constexpr std::size_t kAvx2SortLimit = 128;
 
 VectorKeySort avx512KeySort() {
-#ifdef DSM_KEY_SORT_VECTORS
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx512f")) return {&sortKeysAvx512, kVectorSortLimit};
-#endif
-    return {};
+    return __builtin_cpu_supports("avx512f") ? VectorKeySort{&sortKeysAvx512, kVectorSortLimit} : VectorKeySort{};
 }
-
 VectorKeySort avx2KeySort() {
-#ifdef DSM_KEY_SORT_VECTORS
     __builtin_cpu_init();
-    if (__builtin_cpu_supports("avx2")) return {&sortKeysAvx2, kAvx2SortLimit};
-#endif
-    return {};
+    return __builtin_cpu_supports("avx2") ? VectorKeySort{&sortKeysAvx2, kAvx2SortLimit} : VectorKeySort{};
 }
+#else
+VectorKeySort avx512KeySort() { return {}; }
+VectorKeySort avx2KeySort() { return {}; }
+#endif
 
 VectorKeySort vectorKeySort() {
     const VectorKeySort avx512 = avx512KeySort();
