@@ -476,3 +476,57 @@ TEST(TileCoding, DepthsOfPixelsOfEveryVertexCountRoundTripBitForBit) {
             ASSERT_TRUE(dsm::test::sameFunction(decoded.pixel(p), pixels[p], false)) << "trial " << trial << " pixel " << p;
     }
 }
+
+// Each thread keeps its compressor (zlib stream, zstd context) from one tile
+// to the next: a tile encoded after others, at other levels and with the
+// other codec, must be byte for byte the tile a new thread's first encoding
+// gives, and decode as such.
+TEST(TileCoding, ATileIsEncodedAlikeWhateverTheThreadEncodedBefore) {
+    std::mt19937 rng(5);
+    const auto randomTile = [&](std::uint32_t pixelCount) {
+        std::vector<VisibilityFunction> pixels;
+        for (std::uint32_t p = 0; p < pixelCount; ++p) {
+            VisibilityFunction f(1);
+            float z = 1.0f, v = 1.0f;
+            for (int i = 0, n = static_cast<int>(rng() % 12); i < n; ++i) {
+                z += static_cast<float>(1 + rng() % 300) / 64.0f;
+                v *= static_cast<float>(128 + rng() % 128) / 256.0f;
+                f.append(z, &v);
+            }
+            pixels.push_back(f);
+        }
+        return pixels;
+    };
+    struct Case {
+        dsm::TileCodec codec;
+        int level;
+    };
+    const std::vector<Case> cases{{dsm::TileCodec::Zlib, 6}, {dsm::TileCodec::Zlib, 1}, {dsm::TileCodec::Zstd, 19},
+                                  {dsm::TileCodec::Zlib, 9}, {dsm::TileCodec::Zstd, 3}, {dsm::TileCodec::Zlib, 6}};
+    const auto layoutOf = [](dsm::TileCodec codec) {
+        dsm::format::TileLayout layout{1, false, 1, true, 0.0};
+        layout.predictedDepths = true;
+        layout.codec = codec;
+        return layout;
+    };
+    constexpr std::uint32_t side = 16;
+    const std::vector<VisibilityFunction> tile = randomTile(side * side);
+    std::vector<std::vector<VisibilityFunction>> others;
+    for (int k = 0; k < 4; ++k) others.push_back(randomTile(side * side / (k + 1)));
+    for (const Case& c : cases) {
+        const dsm::format::TileLayout layout = layoutOf(c.codec);
+        std::vector<std::uint8_t> fresh;
+        std::thread([&] { fresh = dsm::format::encodeTile(tile, layout, c.level).stored; }).join();
+        // This thread has encoded the other cases and other tiles by now.
+        for (const auto& other : others)
+            for (const Case& d : cases) (void)dsm::format::encodeTile(other, layoutOf(d.codec), d.level);
+        const dsm::format::EncodedTile again = dsm::format::encodeTile(tile, layout, c.level);
+        ASSERT_LT(again.stored.size(), again.summary.rawBytes) << "level " << c.level;  // compressed
+        EXPECT_EQ(again.stored, fresh) << "level " << c.level;
+        const dsm::format::DecodedTile decoded = dsm::format::decodeTile(again.stored, again.summary, side, side,
+                                                                         layout, dsm::ReaderOptions{}, "tile", 0, 0);
+        for (std::uint32_t p = 0; p < side * side; ++p)
+            ASSERT_TRUE(dsm::test::sameFunction(decoded.pixel(p), tile[p], false))
+                << "level " << c.level << " pixel " << p;
+    }
+}

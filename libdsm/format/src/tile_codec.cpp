@@ -136,10 +136,42 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
 // (Z_BLOCK), so that each part of a coded tile gets Huffman codes of its own:
 // 4 % smaller than one compress2() over the hair ball's tiles. Empty when
 // zlib fails.
+// A thread's zlib stream, reset between tiles rather than made anew: a
+// stream's state is about 256 KiB, cleared at each deflateInit() and given
+// back to the system at each deflateEnd(); for tiles of a few tens of
+// kilobytes those fresh pages cost as much as the compression itself. The
+// reset stream writes the same bytes as a new one.
+class ReusedDeflateStream {
+public:
+    ReusedDeflateStream() = default;
+    ReusedDeflateStream(const ReusedDeflateStream&) = delete;
+    ReusedDeflateStream& operator=(const ReusedDeflateStream&) = delete;
+    ~ReusedDeflateStream() {
+        if (level_ >= 0) deflateEnd(&z_);
+    }
+
+    // The stream at `level`, reset; null when zlib fails (then made anew next time).
+    z_stream* reset(int level) {
+        if (level_ == level && deflateReset(&z_) == Z_OK) return &z_;
+        if (level_ >= 0) deflateEnd(&z_);
+        level_ = -1;
+        z_ = z_stream{};
+        if (deflateInit(&z_, level) != Z_OK) return nullptr;
+        level_ = level;
+        return &z_;
+    }
+
+private:
+    z_stream z_{};
+    int level_ = -1;  // the level of z_, or -1 when z_ holds no state
+};
+
 std::vector<std::uint8_t> deflateParts(const std::vector<std::uint8_t>& raw, const std::vector<std::size_t>& partEnds,
                                        int level) {
-    z_stream z{};
-    if (deflateInit(&z, level) != Z_OK) return {};
+    thread_local ReusedDeflateStream stream;
+    z_stream* const zs = stream.reset(level);
+    if (!zs) return {};
+    z_stream& z = *zs;
     std::vector<std::uint8_t> out(compressBound(static_cast<uLong>(raw.size())) + 16 * (partEnds.size() + 1));
     z.next_out = out.data();
     z.avail_out = static_cast<uInt>(out.size());
@@ -156,7 +188,6 @@ std::vector<std::uint8_t> deflateParts(const std::vector<std::uint8_t>& raw, con
         begin = end;
     }
     out.resize(ok ? z.total_out : 0);
-    deflateEnd(&z);
     return out;
 }
 
@@ -186,10 +217,18 @@ DecodedTile::DecodedTile(std::uint32_t w, std::uint32_t h, std::uint64_t vertice
     layerStarts_ = reinterpret_cast<std::uint32_t*>(at);
 }
 
-// `raw` as one zstd frame at `level`; empty when zstd fails.
+// `raw` as one zstd frame at `level`; empty when zstd fails. Each thread
+// keeps its context for the next tile, for the reason ReusedDeflateStream
+// gives; the frame is the same as from a new context.
 std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int level) {
+    struct FreeContext {
+        void operator()(ZSTD_CCtx* context) const { ZSTD_freeCCtx(context); }
+    };
+    thread_local std::unique_ptr<ZSTD_CCtx, FreeContext> context;
+    if (!context) context.reset(ZSTD_createCCtx());
+    if (!context) return {};
     std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));
-    const std::size_t n = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), level);
+    const std::size_t n = ZSTD_compressCCtx(context.get(), out.data(), out.size(), raw.data(), raw.size(), level);
     if (ZSTD_isError(n)) return {};
     out.resize(n);
     return out;
