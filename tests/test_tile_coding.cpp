@@ -477,10 +477,10 @@ TEST(TileCoding, DepthsOfPixelsOfEveryVertexCountRoundTripBitForBit) {
     }
 }
 
-// Each thread keeps its compressor (zlib stream, zstd context) from one tile
-// to the next: a tile encoded after others, at other levels and with the
-// other codec, must be byte for byte the tile a new thread's first encoding
-// gives, and decode as such.
+// Compressors (zlib streams, zstd contexts) are kept from one tile to the
+// next: a tile encoded after others, at other levels and with the other
+// codec, must be byte for byte what another thread's encoding gives, carry
+// its own level, and decode as such.
 TEST(TileCoding, ATileIsEncodedAlikeWhateverTheThreadEncodedBefore) {
     std::mt19937 rng(5);
     const auto randomTile = [&](std::uint32_t pixelCount) {
@@ -517,12 +517,18 @@ TEST(TileCoding, ATileIsEncodedAlikeWhateverTheThreadEncodedBefore) {
         const dsm::format::TileLayout layout = layoutOf(c.codec);
         std::vector<std::uint8_t> fresh;
         std::thread([&] { fresh = dsm::format::encodeTile(tile, layout, c.level).stored; }).join();
-        // This thread has encoded the other cases and other tiles by now.
+        // The kept compressors have coded the other cases and other tiles by now.
         for (const auto& other : others)
             for (const Case& d : cases) (void)dsm::format::encodeTile(other, layoutOf(d.codec), d.level);
         const dsm::format::EncodedTile again = dsm::format::encodeTile(tile, layout, c.level);
         ASSERT_LT(again.stored.size(), again.summary.rawBytes) << "level " << c.level;  // compressed
         EXPECT_EQ(again.stored, fresh) << "level " << c.level;
+        if (c.codec == dsm::TileCodec::Zlib) {
+            // The stream was made for this level: RFC 1950's FLEVEL, the top
+            // two bits of the header's second byte, as zlib sets it.
+            const int flevel = c.level < 2 ? 0 : c.level < 6 ? 1 : c.level == 6 ? 2 : 3;
+            EXPECT_EQ(again.stored[1] >> 6, flevel) << "level " << c.level;
+        }
         const dsm::format::DecodedTile decoded = dsm::format::decodeTile(again.stored, again.summary, side, side,
                                                                          layout, dsm::ReaderOptions{}, "tile", 0, 0);
         for (std::uint32_t p = 0; p < side * side; ++p)

@@ -1,13 +1,12 @@
 #include "tile_codec.h"
 
 #include <algorithm>
-#include <array>
-#include <atomic>
 #include <bit>
 #include <functional>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <new>
 
 #include <zlib.h>
 #include <zstd.h>
@@ -19,6 +18,7 @@
 #include "byte_io.h"
 #include "dsm/error.h"
 #include "format_layout.h"
+#include "kept_objects.h"
 #include "text.h"
 
 namespace dsm::format {
@@ -132,46 +132,41 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     return raw;
 }
 
+// A zlib stream and the level it was made for; reset between tiles, it
+// writes the same bytes as a new stream.
+struct DeflateStream {
+    z_stream z{};
+    int level = -1;  // -1 while z holds no state
+};
+
+struct DeflateStreamTraits {
+    static DeflateStream* make() { return new (std::nothrow) DeflateStream; }
+    static void destroy(DeflateStream* stream) {
+        if (stream->level >= 0) deflateEnd(&stream->z);
+        delete stream;
+    }
+};
+
+// `stream` ready for a tile at `level`: reset, or made anew at another
+// level. False when zlib fails (the stream then holds no state).
+bool readyForTile(DeflateStream& stream, int level) {
+    if (stream.level == level && deflateReset(&stream.z) == Z_OK) return true;
+    if (stream.level >= 0) deflateEnd(&stream.z);
+    stream.z = z_stream{};
+    stream.level = deflateInit(&stream.z, level) == Z_OK ? level : -1;
+    return stream.level >= 0;
+}
+
 // One zlib stream of `raw` that ends a deflate block at each of `partEnds`
 // (Z_BLOCK), so that each part of a coded tile gets Huffman codes of its own:
 // 4 % smaller than one compress2() over the hair ball's tiles. Empty when
 // zlib fails.
-// A thread's zlib stream, reset between tiles rather than made anew: a
-// stream's state is about 256 KiB, cleared at each deflateInit() and given
-// back to the system at each deflateEnd(); for tiles of a few tens of
-// kilobytes those fresh pages cost as much as the compression itself. The
-// reset stream writes the same bytes as a new one.
-class ReusedDeflateStream {
-public:
-    ReusedDeflateStream() = default;
-    ReusedDeflateStream(const ReusedDeflateStream&) = delete;
-    ReusedDeflateStream& operator=(const ReusedDeflateStream&) = delete;
-    ~ReusedDeflateStream() {
-        if (level_ >= 0) deflateEnd(&z_);
-    }
-
-    // The stream at `level`, reset; null when zlib fails (then made anew next time).
-    z_stream* reset(int level) {
-        if (level_ == level && deflateReset(&z_) == Z_OK) return &z_;
-        if (level_ >= 0) deflateEnd(&z_);
-        level_ = -1;
-        z_ = z_stream{};
-        if (deflateInit(&z_, level) != Z_OK) return nullptr;
-        level_ = level;
-        return &z_;
-    }
-
-private:
-    z_stream z_{};
-    int level_ = -1;  // the level of z_, or -1 when z_ holds no state
-};
-
 std::vector<std::uint8_t> deflateParts(const std::vector<std::uint8_t>& raw, const std::vector<std::size_t>& partEnds,
                                        int level) {
-    thread_local ReusedDeflateStream stream;
-    z_stream* const zs = stream.reset(level);
-    if (!zs) return {};
-    z_stream& z = *zs;
+    static detail::KeptObjects<DeflateStream, DeflateStreamTraits> kept;
+    const detail::KeptObjects<DeflateStream, DeflateStreamTraits>::Lease stream(kept);
+    if (!stream.get() || !readyForTile(*stream.get(), level)) return {};
+    z_stream& z = stream.get()->z;
     std::vector<std::uint8_t> out(compressBound(static_cast<uLong>(raw.size())) + 16 * (partEnds.size() + 1));
     z.next_out = out.data();
     z.avail_out = static_cast<uInt>(out.size());
@@ -217,22 +212,27 @@ DecodedTile::DecodedTile(std::uint32_t w, std::uint32_t h, std::uint64_t vertice
     layerStarts_ = reinterpret_cast<std::uint32_t*>(at);
 }
 
-// `raw` as one zstd frame at `level`; empty when zstd fails. Each thread
-// keeps its context for the next tile, for the reason ReusedDeflateStream
-// gives; the frame is the same as from a new context.
+namespace {
+
+struct ZstdCompressionTraits {
+    static ZSTD_CCtx* make() { return ZSTD_createCCtx(); }
+    static void destroy(ZSTD_CCtx* context) { ZSTD_freeCCtx(context); }
+};
+
+// `raw` as one zstd frame at `level`; empty when zstd fails. The context
+// is kept for later tiles; the frame is the same as from a new one.
 std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int level) {
-    struct FreeContext {
-        void operator()(ZSTD_CCtx* context) const { ZSTD_freeCCtx(context); }
-    };
-    thread_local std::unique_ptr<ZSTD_CCtx, FreeContext> context;
-    if (!context) context.reset(ZSTD_createCCtx());
-    if (!context) return {};
+    static detail::KeptObjects<ZSTD_CCtx, ZstdCompressionTraits> kept;
+    const detail::KeptObjects<ZSTD_CCtx, ZstdCompressionTraits>::Lease context(kept);
+    if (!context.get()) return {};
     std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));
     const std::size_t n = ZSTD_compressCCtx(context.get(), out.data(), out.size(), raw.data(), raw.size(), level);
     if (ZSTD_isError(n)) return {};
     out.resize(n);
     return out;
 }
+
+}  // namespace
 
 EncodedTile encodeTile(std::span<const VisibilityFunction> pixels, const TileLayout& layout, int codecLevel) {
     if (layout.coded && !layout.predictedDepths)
@@ -785,43 +785,19 @@ int inflateWithoutAdler(std::uint8_t* out, std::size_t outSize, std::span<const 
     return rc;
 }
 
-// zstd decompression with a context kept from an earlier tile: setting one
-// up (ZSTD_decompress() does, each call) costs about as much as
-// decompressing a small tile. A few are kept for the threads that decode
-// at once; any beyond them are made and freed per tile.
-class ZstdContexts {
-public:
-    ~ZstdContexts() {
-        for (auto& slot : slots_) ZSTD_freeDCtx(slot.load());
-    }
-    // ZSTD_decompressDCtx()'s result.
-    std::size_t decompress(void* out, std::size_t outSize, const void* in, std::size_t inSize) {
-        ZSTD_DCtx* context = take();
-        if (!context) return ZSTD_decompress(out, outSize, in, inSize);  // out of memory for one
-        const std::size_t size = ZSTD_decompressDCtx(context, out, outSize, in, inSize);
-        give(context);
-        return size;
-    }
-
-private:
-    ZSTD_DCtx* take() {
-        for (auto& slot : slots_)
-            if (ZSTD_DCtx* context = slot.exchange(nullptr, std::memory_order_acquire)) return context;
-        return ZSTD_createDCtx();
-    }
-    void give(ZSTD_DCtx* context) {
-        for (auto& slot : slots_) {
-            ZSTD_DCtx* empty = nullptr;
-            if (slot.compare_exchange_strong(empty, context, std::memory_order_release)) return;
-        }
-        ZSTD_freeDCtx(context);
-    }
-    std::array<std::atomic<ZSTD_DCtx*>, 4> slots_{};
+struct ZstdDecompressionTraits {
+    static ZSTD_DCtx* make() { return ZSTD_createDCtx(); }
+    static void destroy(ZSTD_DCtx* context) { ZSTD_freeDCtx(context); }
 };
 
+// ZSTD_decompress()'s result, with a context kept from an earlier tile
+// (ZSTD_decompress() sets one up each call, about the cost of decompressing
+// a small tile).
 std::size_t zstdDecompress(void* out, std::size_t outSize, const void* in, std::size_t inSize) {
-    static ZstdContexts contexts;
-    return contexts.decompress(out, outSize, in, inSize);
+    static detail::KeptObjects<ZSTD_DCtx, ZstdDecompressionTraits> kept;
+    const detail::KeptObjects<ZSTD_DCtx, ZstdDecompressionTraits>::Lease context(kept);
+    if (!context.get()) return ZSTD_decompress(out, outSize, in, inSize);  // out of memory for one
+    return ZSTD_decompressDCtx(context.get(), out, outSize, in, inSize);
 }
 
 }  // namespace
