@@ -23,6 +23,10 @@
 // extra samples tiles cast along their borders), so every rate is over the
 // same number of samples. "Sampling alone" is the build's own sample count
 // over its crossing time (placing samples and finding what they cross).
+// "Work after sampling" is the one-thread build's gathering and
+// transmittances, sweep, compression and writing: as a share of those
+// stages' time plus the crossings', and in nanoseconds a sample the build
+// took (its own count, border samples included).
 //
 //   bench_build_speed [--smoke] [--scene=FILE] [--size=N] [--spp=S] [--rounds=K] [--far=DEPTH]
 #include <dsm/reference_tracer.h>
@@ -247,7 +251,7 @@ int main(int argc, char** argv) {
         std::printf("| round | scanline build 1 thread, M samples/s | its sampling alone | raytrace build "
                     "1 thread | its sampling alone | Embree all-hit M rays/s | scanline build 2 threads |\n");
         std::printf("|---:|---:|---:|---:|---:|---:|---:|\n");
-        std::vector<double> wholeRatio, samplingRatio, raytraceRatio, twoThreads;
+        std::vector<double> wholeRatio, samplingRatio, raytraceRatio, twoThreads, afterShare, afterNanoseconds;
         for (std::size_t r = 0; r < rounds.size(); ++r) {
             const Round& x = rounds[r];
             const double embree = n / x.embreeSeconds;
@@ -261,6 +265,14 @@ int main(int argc, char** argv) {
             samplingRatio.push_back(scanSampling / embree);
             raytraceRatio.push_back(raySampling / embree);
             twoThreads.push_back(scan2 / scan1);
+            // The work after sampling (gathering and transmittances, sweep,
+            // compression, writing) against the stages' time, crossings
+            // included: dsm-build --stats-json's stage times, one thread.
+            const BuildStats& s = x.scan1;
+            const double after = s.samplingSeconds - s.crossingSeconds + s.sweepSeconds + s.compressionSeconds +
+                                 s.writingSeconds;
+            afterShare.push_back(after / (s.crossingSeconds + after));
+            afterNanoseconds.push_back(1e9 * after / double(s.samples));
         }
         std::printf("\n| ratio (median over rounds; range) | value |\n|---|---:|\n");
         auto row = [](const char* name, const std::vector<double>& v) {
@@ -271,6 +283,10 @@ int main(int argc, char** argv) {
         row("scanline sampling alone ÷ Embree all-hit rays, 1 thread", samplingRatio);
         row("ray-casting sampler's sampling alone ÷ Embree all-hit rays, 1 thread", raytraceRatio);
         row("scanline build, 2 threads ÷ 1 thread", twoThreads);
+        row("work after sampling ÷ all stages' time, 1 thread", afterShare);
+        std::printf("| work after sampling, ns a sample, 1 thread | %.0f (%.0f–%.0f) |\n", median(afterNanoseconds),
+                    *std::min_element(afterNanoseconds.begin(), afterNanoseconds.end()),
+                    *std::max_element(afterNanoseconds.begin(), afterNanoseconds.end()));
         if (!processors.empty()) {
             // Two threads against the two processors' one-thread speeds: 1
             // when the second thread adds all its processor's speed.
