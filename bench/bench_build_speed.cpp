@@ -275,18 +275,16 @@ int main(int argc, char** argv) {
             afterNanoseconds.push_back(1e9 * after / double(s.samples));
         }
         std::printf("\n| ratio (median over rounds; range) | value |\n|---|---:|\n");
-        auto row = [](const char* name, const std::vector<double>& v) {
-            std::printf("| %s | %.2f (%.2f–%.2f) |\n", name, median(v), *std::min_element(v.begin(), v.end()),
-                        *std::max_element(v.begin(), v.end()));
+        auto row = [](const char* name, const std::vector<double>& v, int decimals = 2) {
+            std::printf("| %s | %.*f (%.*f–%.*f) |\n", name, decimals, median(v), decimals,
+                        *std::min_element(v.begin(), v.end()), decimals, *std::max_element(v.begin(), v.end()));
         };
         row("whole scanline build ÷ Embree all-hit rays, 1 thread", wholeRatio);
         row("scanline sampling alone ÷ Embree all-hit rays, 1 thread", samplingRatio);
         row("ray-casting sampler's sampling alone ÷ Embree all-hit rays, 1 thread", raytraceRatio);
         row("scanline build, 2 threads ÷ 1 thread", twoThreads);
         row("work after sampling ÷ all stages' time, 1 thread", afterShare);
-        std::printf("| work after sampling, ns a sample, 1 thread | %.0f (%.0f–%.0f) |\n", median(afterNanoseconds),
-                    *std::min_element(afterNanoseconds.begin(), afterNanoseconds.end()),
-                    *std::max_element(afterNanoseconds.begin(), afterNanoseconds.end()));
+        row("work after sampling, ns a sample, 1 thread", afterNanoseconds, 0);
         if (!processors.empty()) {
             // Two threads against the two processors' one-thread speeds: 1
             // when the second thread adds all its processor's speed.

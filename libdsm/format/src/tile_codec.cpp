@@ -164,7 +164,7 @@ bool readyForTile(DeflateStream& stream, int level) {
 std::vector<std::uint8_t> deflateParts(const std::vector<std::uint8_t>& raw, const std::vector<std::size_t>& partEnds,
                                        int level) {
     static detail::KeptObjects<DeflateStream, DeflateStreamTraits> kept;
-    const detail::KeptObjects<DeflateStream, DeflateStreamTraits>::Lease stream(kept);
+    const decltype(kept)::Lease stream(kept);
     if (!stream.get() || !readyForTile(*stream.get(), level)) return {};
     z_stream& z = stream.get()->z;
     std::vector<std::uint8_t> out(compressBound(static_cast<uLong>(raw.size())) + 16 * (partEnds.size() + 1));
@@ -223,7 +223,7 @@ struct ZstdCompressionTraits {
 // is kept for later tiles; the frame is the same as from a new one.
 std::vector<std::uint8_t> zstdFrame(const std::vector<std::uint8_t>& raw, int level) {
     static detail::KeptObjects<ZSTD_CCtx, ZstdCompressionTraits> kept;
-    const detail::KeptObjects<ZSTD_CCtx, ZstdCompressionTraits>::Lease context(kept);
+    const decltype(kept)::Lease context(kept);
     if (!context.get()) return {};
     std::vector<std::uint8_t> out(ZSTD_compressBound(raw.size()));
     const std::size_t n = ZSTD_compressCCtx(context.get(), out.data(), out.size(), raw.data(), raw.size(), level);
@@ -795,7 +795,7 @@ struct ZstdDecompressionTraits {
 // a small tile).
 std::size_t zstdDecompress(void* out, std::size_t outSize, const void* in, std::size_t inSize) {
     static detail::KeptObjects<ZSTD_DCtx, ZstdDecompressionTraits> kept;
-    const detail::KeptObjects<ZSTD_DCtx, ZstdDecompressionTraits>::Lease context(kept);
+    const decltype(kept)::Lease context(kept);
     if (!context.get()) return ZSTD_decompress(out, outSize, in, inSize);  // out of memory for one
     return ZSTD_decompressDCtx(context.get(), out, outSize, in, inSize);
 }
