@@ -7,8 +7,12 @@ callgrind profile (inclusive counts of the functions that make up each stage).
     bench/build_stages.py build.cg 262144        # samples: 128 * 128 * 16
 
 Prints a Markdown table: instructions per sample and share of the build
-(buildMap). "After sampling" is transmittance + sweep + compression + writing;
-the sweep includes buffering its output for the compressor. Needs
+(buildMap). The stages are those of dsm-build --stats-json: "sampling" is
+placing the samples and finding their crossings; "after sampling" is
+gathering each pixel's inputs (the filter's weights) + transmittance + sweep +
+compression + writing, and its share of the stages (sampling and after) is the
+instruction count's side of the time share that bench_build_speed prints. The
+sweep includes buffering its output for the compressor. Needs
 callgrind_annotate (valgrind) on PATH."""
 import re
 import subprocess
@@ -68,11 +72,22 @@ def main():
                                   "dsm::v0::Span<double const>, int, dsm::v0::SweptVertices&", "PixelBuilder"),
                 largest(flat, "Sweeper::sweep(dsm::v0::Span<dsm::v0::VisibilityView const>, "
                               "dsm::v0::Span<double const>, int, dsm::v0::VertexSink&"))
+    transmittance = largest(flat, "TransmittanceBuilder::build(") + called_from(tree, "SweepInput::assign(", "buildMap")
+    # The scanline sampler's two steps of a tile, lambdas of buildMap named by
+    # their parameters: sampling it (placing the samples, the hider's
+    # crossings) and building its pixels (which calls the sampling). What
+    # building the pixels spends outside its callees is gathering each pixel's
+    # inputs: the filter's weights (the exponential inline) and the pointers.
+    sample_tile = largest(flat, "{lambda(unsigned int, unsigned int, std::array<unsigned int, 4ul> const&")
+    compute_tile = largest(flat, "{lambda(unsigned int, unsigned int, std::vector<dsm::v0::VisibilityFunction")
+    pixels = largest(flat, "PixelBuilder::build(dsm::v0::Span<dsm::v0::SweepInput const* const>")
+    crossings = sample_tile or largest(flat, "ScanlineHider::tileHits(")
+    gathering = max(0, compute_tile - sample_tile - pixels - largest(flat, "TransmittanceBuilder::build("))
     stages = [
         ("bucketing primitives into tiles", largest(flat, "ScanlineHider::ScanlineHider(")),
-        ("sampling: crossings of the samples", largest(flat, "ScanlineHider::tileHits(")),
-        ("transmittance (built, and prepared for the sweep)",
-         largest(flat, "TransmittanceBuilder::build(") + called_from(tree, "SweepInput::assign(", "buildMap")),
+        ("sampling: placing the samples, their crossings", crossings),
+        ("gathering each pixel's inputs (filter weights)", gathering),
+        ("transmittance (built, and prepared for the sweep)", transmittance),
         ("sweep (filtering, output buffered)", sweep),
         # The level-0 pixels' compression; the mip levels' is part of writing.
         ("compression", called_from(tree, "Compressor::pushValid(float const*, double const*", "PixelBuilder")
@@ -83,14 +98,15 @@ def main():
          + max(largest(flat, "MapWriter::writeTile("), largest(flat, "MapWriter::writePreparedTile("))
          + largest(flat, "MapWriter::finish()")),
     ]
-    after = sum(v for _, v in stages[2:])
+    after = sum(v for _, v in stages[2:])  # gathering to writing
     print("| stage (inclusive) | per sample | share of the build |")
     print("|---|---:|---:|")
     print(f"| whole process | {whole / samples:,.0f} | |")
     print(f"| the build (`buildMap`) | {build / samples:,.0f} | 100 % |")
     for name, v in stages:
         print(f"| {name} | {v / samples:,.0f} | {100 * v / build:.1f} % |")
-    print(f"| **after sampling** (transmittance to writing) | {after / samples:,.0f} | **{100 * after / build:.1f} %** |")
+    print(f"| **after sampling** (gathering to writing) | {after / samples:,.0f} | **{100 * after / build:.1f} %** |")
+    print(f"\nAfter sampling ÷ (sampling + after sampling): **{100 * after / (after + crossings):.1f} %**.")
 
 
 if __name__ == "__main__":
