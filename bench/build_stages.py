@@ -82,7 +82,7 @@ def main():
     compute_tile = largest(flat, "{lambda(unsigned int, unsigned int, std::vector<dsm::v0::VisibilityFunction")
     pixels = largest(flat, "PixelBuilder::build(dsm::v0::Span<dsm::v0::SweepInput const* const>")
     crossings = sample_tile or largest(flat, "ScanlineHider::tileHits(")
-    gathering = max(0, compute_tile - sample_tile - pixels - largest(flat, "TransmittanceBuilder::build("))
+    gathering = max(0, compute_tile - sample_tile - pixels - transmittance)
     stages = [
         ("bucketing primitives into tiles", largest(flat, "ScanlineHider::ScanlineHider(")),
         ("sampling: placing the samples, their crossings", crossings),
