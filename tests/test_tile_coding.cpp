@@ -16,6 +16,8 @@
 #include <atomic>
 #include <thread>
 
+#include <zlib.h>
+
 #include "map_fixtures.h"
 #include "oracle.h"
 #include "temp_dir.h"
@@ -526,4 +528,33 @@ TEST(TileCoding, ATileIsEncodedAlikeWhateverWasEncodedBefore) {
             ASSERT_TRUE(dsm::test::sameFunction(decoded.pixel(p), tile[p], false))
                 << "level " << c.level << " pixel " << p;
     }
+}
+
+// Depth steps are deflated with runs alone unless their strings repeat: a tile
+// whose pixels all hold the same depths (parallel cards under an orthographic
+// light) must stay about as small as deflate's full search makes it, not
+// become several times larger.
+TEST(TileCoding, DepthStepsThatRepeatPixelAfterPixelKeepDeflatesSearch) {
+    std::vector<VisibilityFunction> pixels;
+    for (int p = 0; p < 256; ++p) {
+        VisibilityFunction f(1);
+        float v = 1.0f;
+        for (int card = 0; card < 8; ++card) {
+            v *= 0.625f;
+            f.append(2.0f + 0.3125f * static_cast<float>(card) + 0.001f * static_cast<float>(card * card), &v);
+        }
+        pixels.push_back(f);
+    }
+    dsm::format::TileLayout layout{1, false, 1, true, 0.0};
+    layout.predictedDepths = true;
+    const std::vector<std::uint8_t> raw = dsm::format::encodeTile(pixels, layout, 0).stored;  // level 0: stored
+    ASSERT_EQ(raw.size(), dsm::format::encodeTile(pixels, layout, 0).summary.rawBytes);
+    uLongf searched = compressBound(static_cast<uLong>(raw.size()));
+    std::vector<std::uint8_t> packed(searched);
+    ASSERT_EQ(compress2(packed.data(), &searched, raw.data(), static_cast<uLong>(raw.size()), 6), Z_OK);
+    const dsm::format::EncodedTile tile = dsm::format::encodeTile(pixels, layout, 6);
+    EXPECT_LT(tile.stored.size(), 2 * searched) << "raw " << raw.size();
+    const dsm::format::DecodedTile decoded =
+        dsm::format::decodeTile(tile.stored, tile.summary, 16, 16, layout, dsm::ReaderOptions{}, "tile", 0, 0);
+    for (std::uint32_t p = 0; p < 256; ++p) ASSERT_TRUE(dsm::test::sameFunction(decoded.pixel(p), pixels[p], false));
 }
