@@ -195,7 +195,8 @@ bool repeatsStrings(const std::uint8_t* bytes, std::size_t size) {
 // (Z_RLE) do, at several times the cost; unless they do repeat. The pixel
 // table, values and counts repeat strings (plateaus, layers: runs alone make
 // an area light's values 66 % larger), where Z_FILTERED, which drops matches
-// of five bytes or fewer, codes the examples' 0-3 % smaller than the default.
+// of five bytes or fewer, codes the examples' values and counts up to 3 %
+// smaller than the default strategy (the leaves' RGB values 0.8 % larger).
 int partStrategy(std::size_t k, const std::uint8_t* bytes, std::size_t size) {
     const bool varintDepths = k == kDepthEnds || k == kDepthSteps;
     return varintDepths && !repeatsStrings(bytes, size) ? Z_RLE : Z_FILTERED;
