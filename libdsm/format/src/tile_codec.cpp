@@ -137,29 +137,30 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     return raw;
 }
 
-// A zlib stream and the level it was made for; reset between tiles, it
-// writes the same bytes as a new stream.
+// A zlib stream kept from tile to tile; reset, it writes the same bytes as a
+// new stream. deflateParts() sets the level with each part's strategy, so a
+// stream made for one level serves any.
 struct DeflateStream {
     z_stream z{};
-    int level = -1;  // -1 while z holds no state
+    bool holdsState = false;
 };
 
 struct DeflateStreamTraits {
     static DeflateStream* make() { return new (std::nothrow) DeflateStream; }
     static void destroy(DeflateStream* stream) {
-        if (stream->level >= 0) deflateEnd(&stream->z);
+        if (stream->holdsState) deflateEnd(&stream->z);
         delete stream;
     }
 };
 
-// `stream` ready for a tile at `level`: reset, or made anew at another
-// level. False when zlib fails (the stream then holds no state).
+// `stream` ready for a tile at `level`: reset, or made anew. False when zlib
+// fails (the stream then holds no state).
 bool readyForTile(DeflateStream& stream, int level) {
-    if (stream.level == level && deflateReset(&stream.z) == Z_OK) return true;
-    if (stream.level >= 0) deflateEnd(&stream.z);
+    if (stream.holdsState && deflateReset(&stream.z) == Z_OK) return true;
+    if (stream.holdsState) deflateEnd(&stream.z);
     stream.z = z_stream{};
-    stream.level = deflateInit(&stream.z, level) == Z_OK ? level : -1;
-    return stream.level >= 0;
+    stream.holdsState = deflateInit(&stream.z, level) == Z_OK;
+    return stream.holdsState;
 }
 
 // Whether deflate's search for repeated strings pays on `bytes`: whether a
