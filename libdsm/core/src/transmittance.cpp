@@ -174,6 +174,18 @@ void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCo
         out.assign(impl_->function);
         return;
     }
+    if (channels == 1 && ray.hits.size() <= SweepInput::kInlineDepths) {
+        // A mono ray of a few hits, most of a map's: kept and sorted on the
+        // stack, the same steps as below without the calls and the checks
+        // of sizes that cost more than the few hits themselves.
+        SurfaceHit kept[SweepInput::kInlineDepths];
+        bool valid = true;
+        const std::size_t count = keepHits<1>(ray.hits, zStart, kept, valid);
+        if (!valid) checkHits(ray.hits, channels);  // throws, naming the first hit at fault
+        detail::insertionSort(kept, count, [](const SurfaceHit& a, const SurfaceHit& b) { return a.z < b.z; });
+        Impl::prepareSteps<1>(std::span<const SurfaceHit>(kept, count), withCounts, out);
+        return;
+    }
     const std::span<const SurfaceHit> hits = impl_->sortedHits(ray, channels, zStart);
     if (channels == 1)
         Impl::prepareSteps<1>(hits, withCounts, out);
