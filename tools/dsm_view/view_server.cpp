@@ -253,7 +253,8 @@ bool isLoopback(const std::string& host) {
 bool hostAllowed(const httplib::Request& request, const std::string& host, int port) {
     if (!isLoopback(host)) return true;
     const std::string value = request.get_header_value("Host");
-    const std::string suffix = ":" + std::to_string(port);
+    std::string suffix = ":";
+    suffix += std::to_string(port);
     for (const char* name : {"127.0.0.1", "localhost", "[::1]"})
         if (value == name + suffix) return true;
     return false;

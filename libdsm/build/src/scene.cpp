@@ -874,9 +874,11 @@ json parseJson(const Parser& p, const std::string& text) {
     std::vector<Level> levels;
     auto pointer = [&] {
         std::string out;
-        for (const Level& level : levels)
-            if (level.isArray) out += "/" + std::to_string(level.index);
-            else if (level.inMember) out += "/" + pointerToken(level.key);
+        for (const Level& level : levels) {
+            if (!level.isArray && !level.inMember) continue;
+            out += '/';
+            out += level.isArray ? std::to_string(level.index) : pointerToken(level.key);
+        }
         return out;
     };
     auto elementDone = [&] {

@@ -29,7 +29,7 @@ constexpr std::size_t kNoFile = std::string_view::npos;
 /// odd path clipped (detail::clip), so that form is accepted too.
 std::size_t detailStart(std::string_view message, const std::string& file) {
     const std::string exact = "'" + file + "'";
-    const std::string clipped = "'" + detail::clip(file, detail::kMaxQuotedPath) + "'";
+    const std::string clipped = detail::quotedPath(file);
     for (const std::string* quoted : {&exact, &clipped}) {
         const std::size_t at = message.find(*quoted);
         // At the start, or after a lead-in that says what the file is ("scene ",

@@ -26,6 +26,9 @@ inline constexpr std::size_t kHugePageBytes = std::size_t(2) << 20;
 
 inline void* allocateLarge(std::size_t bytes) {
     if (bytes < kHugePageBytes) return ::operator new(bytes);
+    // No object is larger than PTRDIFF_MAX bytes, and the rounding must not wrap.
+    if (bytes > static_cast<std::size_t>(std::numeric_limits<std::ptrdiff_t>::max()) - kHugePageBytes)
+        throw std::bad_alloc();
     const std::size_t rounded = (bytes + kHugePageBytes - 1) & ~(kHugePageBytes - 1);
     void* p = std::aligned_alloc(kHugePageBytes, rounded);
     if (p == nullptr) throw std::bad_alloc();

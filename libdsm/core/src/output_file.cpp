@@ -35,6 +35,16 @@ std::string directoryOf(const std::string& path) {
 
 std::string fileNameOf(const std::string& path) { return fs::path(path).filename().string(); }
 
+/// How the names of an output's temporaries start: hidden, beside it.
+/// Appended piece by piece: GCC 12 at -O3 warns (-Wrestrict, a false
+/// positive) about its own inlined "." + std::string&&.
+std::string temporaryPrefix(const std::string& path) {
+    std::string prefix = ".";
+    prefix += fileNameOf(path);
+    prefix += ".tmp-";
+    return prefix;
+}
+
 /// What a file is, for comparing names: its device and inode when it exists,
 /// else its directory's device and inode and its name there.
 struct FileIdentity {
@@ -138,7 +148,7 @@ void refuseSharedOutputs(const std::vector<std::string>& outputs) {
 std::vector<std::string> staleTemporaries(const std::string& path, std::int64_t minimumAgeSeconds) {
     std::vector<std::string> found;
     const std::string directory = directoryOf(path);
-    const std::string prefix = "." + fileNameOf(path) + ".tmp-";
+    const std::string prefix = temporaryPrefix(path);
     DIR* listing = ::opendir(directory.c_str());
     if (!listing) return found;
     const std::time_t now = std::time(nullptr);
@@ -165,7 +175,7 @@ std::size_t removeStaleTemporaries(const std::string& path, std::int64_t minimum
 OutputFile::OutputFile(std::string path, std::string_view suffix) : path_(std::move(path)) {
     checkOutputPath(path_);
     const fs::path target(path_);
-    std::string pattern = (target.parent_path() / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
+    std::string pattern = (target.parent_path() / (temporaryPrefix(path_) + "XXXXXX")).string();
     pattern += suffix;
     fd_ = ::mkstemps(pattern.data(), static_cast<int>(suffix.size()));
     if (fd_ < 0) fail(concat("cannot create a temporary file beside it: ", std::strerror(errno)));

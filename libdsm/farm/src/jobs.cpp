@@ -65,7 +65,9 @@ std::string farmIndexRanges(const std::vector<std::uint32_t>& indices) {
     for (std::size_t i = 0; i < indices.size();) {
         std::size_t j = i;
         while (j + 1 < indices.size() && indices[j + 1] == indices[j] + 1) ++j;
-        out += (out.empty() ? "" : ",") + std::to_string(indices[i]) + (j > i ? concat("-", indices[j]) : "");
+        if (!out.empty()) out += ',';
+        out += std::to_string(indices[i]);
+        if (j > i) out += concat("-", indices[j]);
         i = j + 1;
     }
     return out;

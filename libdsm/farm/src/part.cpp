@@ -21,7 +21,7 @@ DSM_NAMESPACE_BEGIN
 
 using detail::clip;
 using detail::concat;
-using detail::kMaxQuotedPath;
+using detail::quotedPath;
 using Json = nlohmann::json;
 namespace fs = std::filesystem;
 
@@ -30,15 +30,6 @@ namespace {
 /// Marks a part record, and its layout's version.
 constexpr const char* kRecordMark = "dsm_farm_part";
 constexpr int kRecordVersion = 1;
-
-// Appended piece by piece: GCC 12 at -O3 warns (-Wrestrict) about its own
-// inlined "'" + std::string&&.
-std::string quotedPath(const std::string& path) {
-    std::string quoted = "'";
-    quoted += clip(path, kMaxQuotedPath);
-    quoted += '\'';
-    return quoted;
-}
 
 /// Shortest text that reads back as the same double.
 std::string exactText(double value) {
