@@ -166,7 +166,8 @@ TEST(ShadowSystem, EightThreadsAgreeWithOneUnderASmallBudget) {
 TEST(ShadowSystem, HundredMapsUnderEightOpenFilesAgreeWithSeparateOpens) {
     TempDir dir;
     std::vector<std::string> paths;
-    for (int i = 0; i < 100; ++i) paths.push_back(writeRandomMap(dir, numberedMapName(i), 100 + i, i % 2 ? 3 : 1, 1, 20, 12));
+    for (int i = 0; i < 100; ++i)
+        paths.push_back(writeRandomMap(dir, numberedMapName(i), 100 + i, i % 2 ? 3 : 1, 1, 20, 12));
     ShadowSystemOptions options;
     options.maxOpenFiles = 8;
     options.cacheBytes = 32 << 10;  // small: tiles are read again, so files reopen
