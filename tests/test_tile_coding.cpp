@@ -547,8 +547,9 @@ TEST(TileCoding, DepthStepsThatRepeatPixelAfterPixelKeepDeflatesSearch) {
     }
     dsm::format::TileLayout layout{1, false, 1, true, 0.0};
     layout.predictedDepths = true;
-    const std::vector<std::uint8_t> raw = dsm::format::encodeTile(pixels, layout, 0).stored;  // level 0: stored
-    ASSERT_EQ(raw.size(), dsm::format::encodeTile(pixels, layout, 0).summary.rawBytes);
+    const dsm::format::EncodedTile storedTile = dsm::format::encodeTile(pixels, layout, 0);  // level 0: stored
+    const std::vector<std::uint8_t>& raw = storedTile.stored;
+    ASSERT_EQ(raw.size(), storedTile.summary.rawBytes);
     uLongf searched = compressBound(static_cast<uLong>(raw.size()));
     std::vector<std::uint8_t> packed(searched);
     ASSERT_EQ(compress2(packed.data(), &searched, raw.data(), static_cast<uLong>(raw.size()), 6), Z_OK);

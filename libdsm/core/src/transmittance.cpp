@@ -41,19 +41,14 @@ void checkVolume(std::span<const VolumeSample> volume) {
     }
 }
 
-// Sorts items[0, n) by depth, equal depths in their given order (what
-// std::stable_sort does, without the buffer it allocates on every call):
-// through a permutation sorted by (depth, index) and a scratch copy.
-// A ray's few hits (the common case) are sorted in place by insertion, which
-// moves an item only past deeper ones and so keeps equal depths in order too.
+// Hits and volume samples ordered by their depths alone.
+constexpr auto byDepth = [](const auto& a, const auto& b) { return a.z < b.z; };
+
+// sortByDepth() of more items than insertion suits, out of line, so that the
+// few of the common case are sorted where the caller is.
 template <class T>
-void sortByDepth(T* items, std::size_t n, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
-    constexpr std::size_t kInsertionLimit = 16;
-    const auto byDepth = [](const T& a, const T& b) { return a.z < b.z; };
-    if (n <= kInsertionLimit) {
-        detail::insertionSort(items, n, byDepth);
-        return;
-    }
+[[gnu::noinline]] void sortManyByDepth(T* items, std::size_t n, std::vector<std::uint32_t>& order,
+                                       std::vector<T>& scratch) {
     if (std::is_sorted(items, items + n, byDepth)) return;
     order.resize(n);
     for (std::uint32_t i = 0; i < n; ++i) order[i] = i;
@@ -63,6 +58,18 @@ void sortByDepth(T* items, std::size_t n, std::vector<std::uint32_t>& order, std
     scratch.resize(n);
     for (std::size_t i = 0; i < n; ++i) scratch[i] = items[order[i]];
     std::copy(scratch.begin(), scratch.end(), items);
+}
+
+// Sorts items[0, n) by depth, equal depths in their given order (what
+// std::stable_sort does, without the buffer it allocates on every call):
+// through a permutation sorted by (depth, index) and a scratch copy.
+// A ray's few hits (the common case) are sorted in place by insertion, which
+// moves an item only past deeper ones and so keeps equal depths in order too.
+template <class T>
+void sortByDepth(T* items, std::size_t n, std::vector<std::uint32_t>& order, std::vector<T>& scratch) {
+    constexpr std::size_t kInsertionLimit = 16;
+    if (n <= kInsertionLimit) detail::insertionSort(items, n, byDepth);
+    else sortManyByDepth(items, n, order, scratch);
 }
 
 // Copies the hits beyond zStart that block some light (an opacity not 0 in
@@ -182,7 +189,7 @@ void TransmittanceBuilder::build(const SampleRay& ray, int channels, bool withCo
         bool valid = true;
         const std::size_t count = keepHits<1>(ray.hits, zStart, kept, valid);
         if (!valid) checkHits(ray.hits, channels);  // throws, naming the first hit at fault
-        detail::insertionSort(kept, count, [](const SurfaceHit& a, const SurfaceHit& b) { return a.z < b.z; });
+        sortByDepth(kept, count, impl_->order, impl_->hitScratch);
         Impl::prepareSteps<1>(std::span<const SurfaceHit>(kept, count), withCounts, out);
         return;
     }

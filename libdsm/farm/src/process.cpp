@@ -68,8 +68,8 @@ pid_t startCommand(const std::vector<std::string>& args, const std::string& logF
     pid_t pid = 0;
     if (args.empty() ||
         ::posix_spawnp(&pid, args[0].c_str(), &files.actions, nullptr, argvOf(args).data(), environ) != 0)
-        throw Error(ErrorCode::io, concat("'", clip(args.empty() ? "" : args[0], kMaxQuotedPath),
-                                          "': cannot be started (log '", clip(logFile, kMaxQuotedPath), "')"));
+        throw Error(ErrorCode::io, concat(quotedPath(args.empty() ? "" : args[0]), ": cannot be started (log ",
+                                          quotedPath(logFile), ")"));
     return pid;
 }
 

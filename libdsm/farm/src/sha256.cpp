@@ -87,13 +87,13 @@ std::string Sha256::hex() {
 
 std::string sha256OfFile(const std::string& path) {
     const std::unique_ptr<std::FILE, int (*)(std::FILE*)> file(std::fopen(path.c_str(), "rb"), &std::fclose);
-    if (!file) throw Error(ErrorCode::io, concat("'", clip(path, kMaxQuotedPath), "': cannot be opened to hash"));
+    if (!file) throw Error(ErrorCode::io, concat(quotedPath(path), ": cannot be opened to hash"));
     Sha256 hash;
     char buffer[1 << 16];
     std::size_t got = 0;
     while ((got = std::fread(buffer, 1, sizeof buffer, file.get())) > 0) hash.update(buffer, got);
     if (std::ferror(file.get()))
-        throw Error(ErrorCode::io, concat("'", clip(path, kMaxQuotedPath), "': read error while hashing"));
+        throw Error(ErrorCode::io, concat(quotedPath(path), ": read error while hashing"));
     return hash.hex();
 }
 
