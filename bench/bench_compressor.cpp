@@ -37,6 +37,9 @@ struct Tolerance {
 
 std::string compressName(const Input& in, const Tolerance& t) { return "compress/" + in.name + "/eps=" + t.name; }
 std::string runName(const Input& in, const Tolerance& t) { return "pushValid-run/" + in.name + "/eps=" + t.name; }
+std::string centredName(const Input& in, const Tolerance& t) {
+    return "pushValid-run-centred/" + in.name + "/eps=" + t.name;
+}
 std::string memcpyName(const Input& in) { return "memcpy/" + in.name; }
 
 // Outside any timing: the output is a valid function within epsilon of the
@@ -44,10 +47,12 @@ std::string memcpyName(const Input& in) { return "memcpy/" + in.name; }
 // whether pushed vertex by vertex or as one run. The input values are
 // float already, so the bound is epsilon itself; 1e-9 covers the double
 // evaluation of the two piecewise-linear functions.
-bool checkOutput(const Input& in, const Tolerance& t, std::size_t& outVertices) {
+bool checkOutput(const Input& in, const Tolerance& t, bool centred, std::size_t& outVertices) {
     CompressorOptions options;
     options.tolerance = t.epsilon;
     options.channels = in.function.channels();
+    options.centred = centred;
+    const std::string name = centred ? centredName(in, t) : compressName(in, t);
     Compressor compressor(options);
     const VisibilityFunction& f = in.function;
     for (std::size_t i = 0; i < f.size(); ++i) compressor.push(f.z(i), f.values(i), 0);
@@ -55,13 +60,13 @@ bool checkOutput(const Input& in, const Tolerance& t, std::size_t& outVertices) 
     outVertices = out.size();
     compressor.pushValid(f.depths().data(), f.allValues().data(), nullptr, f.size());
     if (compressor.finish() != out) {
-        std::printf("check %s: pushValid() of the run differs from push() per vertex\n", compressName(in, t).c_str());
+        std::printf("check %s: pushValid() of the run differs from push() per vertex\n", name.c_str());
         return false;
     }
     try {
         out.validate();
     } catch (const Error& e) {
-        std::printf("check %s: invalid output: %s\n", compressName(in, t).c_str(), e.what());
+        std::printf("check %s: invalid output: %s\n", name.c_str(), e.what());
         return false;
     }
     double maxErr = 0.0;
@@ -76,7 +81,7 @@ bool checkOutput(const Input& in, const Tolerance& t, std::size_t& outVertices) 
         if (i + 1 < f.size() && f.z(i + 1) > f.z(i)) probe(0.5 * (static_cast<double>(f.z(i)) + f.z(i + 1)));
     }
     const bool ok = maxErr <= t.epsilon + 1e-9;
-    std::printf("check %s: %zu -> %zu vertices (%s), max |V'-V| = %.3g %s %.3g\n", compressName(in, t).c_str(),
+    std::printf("check %s: %zu -> %zu vertices (%s), max |V'-V| = %.3g %s %.3g\n", name.c_str(),
                 f.size(), out.size(), out.channels() == 1 ? "mono" : "rgb", maxErr, ok ? "<=" : "EXCEEDS",
                 t.epsilon);
     return ok;
@@ -106,10 +111,11 @@ void benchCompress(benchmark::State& state, const Input* in, double epsilon, std
 
 // The library's own path: the whole function handed over as one run of
 // vertices known to be valid (what a build does with the sweep's output).
-void benchRun(benchmark::State& state, const Input* in, double epsilon, std::size_t outVertices) {
+void benchRun(benchmark::State& state, const Input* in, double epsilon, bool centred, std::size_t outVertices) {
     const VisibilityFunction& f = in->function;
     CompressorOptions options;
     options.tolerance = epsilon;
+    options.centred = centred;
     options.channels = f.channels();
     Compressor compressor(options);
     for (auto _ : state) {
@@ -153,10 +159,14 @@ int main(int argc, char** argv) {
     const std::vector<Tolerance> tolerances = {{"auto", autoTolerance(kSamplesPerPixel)}, {"0", 0.0}};
 
     std::vector<std::vector<std::size_t>> outVertices(inputs.size(), std::vector<std::size_t>(tolerances.size()));
+    std::vector<std::vector<std::size_t>> centredVertices = outVertices;
     bool ok = true;
     for (std::size_t i = 0; i < inputs.size(); ++i)
-        for (std::size_t t = 0; t < tolerances.size(); ++t)
-            ok = checkOutput(inputs[i], tolerances[t], outVertices[i][t]) && ok;
+        for (std::size_t t = 0; t < tolerances.size(); ++t) {
+            ok = checkOutput(inputs[i], tolerances[t], false, outVertices[i][t]) && ok;
+            if (tolerances[t].epsilon > 0.0)
+                ok = checkOutput(inputs[i], tolerances[t], true, centredVertices[i][t]) && ok;
+        }
     if (!ok) return 1;
     std::printf("\n");
     std::fflush(stdout);
@@ -167,8 +177,13 @@ int main(int argc, char** argv) {
                                          tolerances[t].epsilon, outVertices[i][t])
                 ->Unit(benchmark::kMicrosecond);
             benchmark::RegisterBenchmark(runName(inputs[i], tolerances[t]).c_str(), benchRun, &inputs[i],
-                                         tolerances[t].epsilon, outVertices[i][t])
+                                         tolerances[t].epsilon, false, outVertices[i][t])
                 ->Unit(benchmark::kMicrosecond);
+            // Centred segments (CompressorOptions::centred) at a tolerance > 0; at 0 every vertex is kept.
+            if (tolerances[t].epsilon > 0.0)
+                benchmark::RegisterBenchmark(centredName(inputs[i], tolerances[t]).c_str(), benchRun, &inputs[i],
+                                             tolerances[t].epsilon, true, centredVertices[i][t])
+                    ->Unit(benchmark::kMicrosecond);
         }
         benchmark::RegisterBenchmark(memcpyName(inputs[i]).c_str(), benchMemcpy, &inputs[i])
             ->Unit(benchmark::kMicrosecond);
@@ -199,12 +214,17 @@ int main(int argc, char** argv) {
                         formatRate(static_cast<double>(in.bytes()) / tm, "B").c_str(), mm.spreadPercent(), tc / tm);
         }
     }
-    std::printf("\n(push: one push() per vertex, input checked; run: pushValid() of the whole function)\n");
+    std::printf("\n(push: one push() per vertex, input checked; run: pushValid() of the whole function; centred:\n"
+                "the run with centred segments)\n");
     for (const Input& in : inputs)
-        for (const Tolerance& t : tolerances)
-            std::printf("compressor/memcpy %s eps=%g: push %.1f, run %.1f\n", in.name.c_str(), t.epsilon,
-                        results[compressName(in, t)].median() / results[memcpyName(in)].median(),
-                        results[runName(in, t)].median() / results[memcpyName(in)].median());
+        for (const Tolerance& t : tolerances) {
+            const double memcpyTime = results[memcpyName(in)].median();
+            std::printf("compressor/memcpy %s eps=%g: push %.1f, run %.1f", in.name.c_str(), t.epsilon,
+                        results[compressName(in, t)].median() / memcpyTime,
+                        results[runName(in, t)].median() / memcpyTime);
+            if (t.epsilon > 0.0) std::printf(", centred %.1f", results[centredName(in, t)].median() / memcpyTime);
+            std::printf("\n");
+        }
     if (args.smoke) std::printf("(smoke run: the numbers above are not measurements)\n");
     return 0;
 }
