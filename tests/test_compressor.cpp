@@ -836,6 +836,44 @@ TEST(CompressorCentred, PlateauBehindASurfaceStaysLevel) {
     EXPECT_LE(std::abs(centredFall), 0.1);
 }
 
+// One channel is centred in slopes, each vertex scaled by its 1 / dz, and
+// three by the windows' cross products: the same segments. Grey RGB kept as
+// RGB (allowMonochrome off) takes the second way; its channels must match
+// the mono result vertex for vertex, whether pushed one by one or as a run
+// (whose vertices taken again also go as runs).
+TEST(CompressorCentred, MonoSlopesAgreeWithRgbWindows) {
+    std::mt19937_64 rng(23);
+    std::vector<VisibilityFunction> inputs;
+    for (int trial = 0; trial < 16; ++trial) {
+        inputs.push_back(dsm::test::randomMonotone(rng, 3 + trial * 11, 1, true));
+        inputs.push_back(randomSteps(rng, 8 + trial * 25, 1));
+    }
+    inputs.push_back(smoothVolume(500, 6.0f));
+    inputs.push_back(plateauBetweenFalls());
+    std::size_t vertices = 0;
+    for (const double eps : {0.005, 0.0625, 0.25}) {
+        for (std::size_t k = 0; k < inputs.size(); ++k) {
+            for (const bool asRun : {false, true}) {
+                CompressorOptions o;
+                o.tolerance = eps;
+                o.centred = true;
+                o.allowMonochrome = false;
+                const VisibilityFunction mono = compressWith(inputs[k], o, asRun);
+                const VisibilityFunction rgb = compressWith(grey(inputs[k]), o, asRun);
+                ASSERT_EQ(rgb.channels(), 3);
+                ASSERT_EQ(mono.size(), rgb.size()) << "eps " << eps << " input " << k << (asRun ? " run" : "");
+                for (std::size_t i = 0; i < mono.size(); ++i) {
+                    EXPECT_EQ(mono.z(i), rgb.z(i)) << "eps " << eps << " input " << k << " vertex " << i;
+                    EXPECT_EQ(mono.count(i), rgb.count(i));
+                    for (int c = 0; c < 3; ++c) EXPECT_NEAR(mono.value(i), rgb.value(i, c), 1e-6);
+                }
+                vertices += mono.size();
+            }
+        }
+    }
+    EXPECT_GT(vertices, 1000u);
+}
+
 // Long inputs centred: a volume of 40,000 steps and a staircase of 20,000
 // steps stay within the bound (the vertices a segment may take again are
 // capped, kMostPending, so the work stays linear).

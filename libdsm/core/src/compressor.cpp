@@ -8,6 +8,7 @@
 
 #include "simd_lanes.h"
 #include "slope_blocks.h"
+#include "vertex_queue.h"
 #include "dsm/error.h"
 #include "text.h"
 
@@ -25,6 +26,10 @@ constexpr double kBalance = 0.1;
 // The most vertices a centred segment takes past its balanced point and may
 // take again: each input vertex is then taken at most this many times more.
 constexpr std::size_t kMostPending = 4096;
+// The most vertices taken again as one run (Greedy::replay()): a longer
+// stretch is more often cut short by the segment's end, and its band is
+// compared vertex by vertex first.
+constexpr std::size_t kReplayRun = 32;
 
 // pushValid() checks its input only in debug builds.
 #ifdef NDEBUG
@@ -83,15 +88,6 @@ struct SlopeWindow {
         const double limit = consistent() ? -origin * den[0] : std::numeric_limits<double>::infinity();
         endLimit = Double2{limit, limit};
     }
-};
-
-// An input vertex a centred segment took past its balanced point, kept to be
-// taken again.
-struct PendingVertex {
-    float z;
-    double v[kMaxChannels];
-    std::uint32_t count;
-    double band;
 };
 
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
@@ -167,6 +163,8 @@ public:
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if constexpr (C == 1 && !Centred)
             if (band > 0.0) return extendRunBySlopes<withCounts>(z, v, counts, n, band);
+        if constexpr (C == 1 && Centred)
+            if (band > 0.0) return extendCentredRunBySlopes<withCounts>(z, v, counts, n, band);
         SlopeWindow w[C];
         Double2 origin[C];
         forEachChannel<C>([&](int c) {
@@ -288,12 +286,77 @@ public:
             lo = nextLo;
             if constexpr (withCounts) count += counts[taken];
         }
-        window_[0].num = Double2{hi, -lo};
-        window_[0].den = Double2{1.0, 1.0};
-        window_[0].limitEnd(frame.originV);
+        window_[0] = slopeWindow(lo, hi, frame.originV);
         segmentCount_ += count;
         if (taken > 0) lastZ_ = z[taken - 1];
         return taken;
+    }
+
+    // extendRun() for one channel, centred, with a band > 0: the window as
+    // two slopes, each vertex's bounds as vertexSlopes() makes them (as
+    // extendRunBySlopes() takes them one by one), and whether the segment can
+    // be balanced ending at each vertex worked out in slopes too, with the
+    // vertex's 1 / dz instead of the divisions of balanced(): the same test.
+    template <bool withCounts, typename T>
+    std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                                         double band) {
+        const detail::SlopeFrame frame = detail::slopeFrame(originZ_, originV_[0], band);
+        const double origin = frame.originV, margin = kBalance * band_;
+        double hi = window_[0].hi(), lo = window_[0].lo();
+        double twiceIntegral = twiceIntegral_[0], previousV = inputV_[0];
+        double previousZ = lastZ_;
+        std::uint64_t count = 0;
+        std::size_t i = 0;
+        for (; i < n; ++i) {
+            // vertexSlopes(), keeping its 1 / dz for the balance below.
+            const double dz = static_cast<double>(z[i]) - static_cast<double>(originZ_);
+            const double inverse = detail::depthInverse(z[i], originZ_, dz);
+            const detail::VertexSlopes s = detail::slopesScaledBy(inverse, dz, v[i], frame);
+            const double nextHi = std::min(hi, s.top), nextLo = std::max(lo, s.bottom);
+            if (!detail::feasibleWindow(nextLo, nextHi, origin, dz)) break;
+            hi = nextHi;
+            lo = nextLo;
+            if constexpr (withCounts) count += counts[i];
+            const double value = static_cast<double>(v[i]);
+            twiceIntegral += (static_cast<double>(z[i]) - previousZ) * (previousV + value);
+            previousZ = z[i];
+            previousV = value;
+            // balanced(): of the feasible slopes, one within 2 * margin / dz of
+            // the balanced slope (twiceIntegral - 2 origin dz) / dz^2 whose end
+            // is within margin of the input.
+            const double feasibleHi = std::min(hi, 0.0);
+            const double feasibleLo = std::min(std::max(lo, -origin * inverse), feasibleHi);
+            const double balancedSlope = (twiceIntegral * inverse - 2.0 * origin) * inverse;
+            const double spread = 2.0 * margin * inverse;
+            const double lowest =
+                std::max(std::max(feasibleLo, balancedSlope - spread), (previousV - margin - origin) * inverse);
+            const double highest =
+                std::min(std::min(feasibleHi, balancedSlope + spread), (previousV + margin - origin) * inverse);
+            const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
+            if (lowest <= highest) {
+                SlopeWindow w = slopeWindow(lo, hi, origin);
+                notePoint<1>(true, &w, &twiceIntegral, &previousV, z[i], &v[i], vertexCount, band,
+                             segmentCount_ + count);
+            } else {
+                notePoint<1>(false, nullptr, &twiceIntegral, &previousV, z[i], &v[i], vertexCount, band,
+                             segmentCount_ + count);
+            }
+        }
+        window_[0] = slopeWindow(lo, hi, origin);
+        twiceIntegral_[0] = twiceIntegral;
+        inputV_[0] = previousV;
+        segmentCount_ += count;
+        if (i > 0) lastZ_ = z[i - 1];
+        return i;
+    }
+
+    // The window of the slopes [lo, hi] from an origin at V = origin.
+    static SlopeWindow slopeWindow(double lo, double hi, double origin) {
+        SlopeWindow w;
+        w.num = Double2{hi, -lo};
+        w.den = Double2{1.0, 1.0};
+        w.limitEnd(origin);
+        return w;
     }
 
     // extendRun() of one channel whose vertices have bands of their own (grey
@@ -391,11 +454,7 @@ private:
             // A segment that closes at its balanced point hands the vertices
             // after it back to be taken again (replay()): this one goes after
             // them, so it waits beneath them.
-            if (backtracks()) {
-                PendingVertex p{z, {}, count, band};
-                std::copy(v, v + C, p.v);
-                toReplay_.push_back(p);
-            }
+            if (backtracks()) toReplay_.pushFront<C>(z, v, count, band);
             if (closeSegment<C>()) return;
         }
         if (z == originZ_) {
@@ -504,7 +563,16 @@ private:
     template <int C, typename T>
     void noteBalance(const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z, const T* v,
                      std::uint32_t count, double band, std::uint64_t segmentCount) {
-        if (balanced<C>(w, twiceIntegral, inputV, z)) {
+        notePoint<C>(balanced<C>(w, twiceIntegral, inputV, z), w, twiceIntegral, inputV, z, v, count, band,
+                     segmentCount);
+    }
+
+    // noteBalance() with the balance worked out (`w` is read only when
+    // the segment is balanced).
+    template <int C, typename T>
+    void notePoint(bool isBalanced, const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z,
+                   const T* v, std::uint32_t count, double band, std::uint64_t segmentCount) {
+        if (isBalanced) {
             BalancedPoint& b = balancedPoint_;
             b.valid = true;
             b.z = z;
@@ -524,9 +592,7 @@ private:
                 pending_.clear();
                 return;
             }
-            PendingVertex p{z, {}, count, band};
-            forEachChannel<C>([&](int c) { p.v[c] = static_cast<double>(v[c]); });
-            pending_.push_back(p);
+            pending_.pushBack<C>(z, v, count, band);
         }
     }
 
@@ -609,7 +675,7 @@ private:
             originStored_ = true;
             originIsStep_ = false;
         }
-        if (backtrack) toReplay_.insert(toReplay_.end(), pending_.rbegin(), pending_.rend());
+        if (backtrack) toReplay_.pushFront<C>(pending_);
         pending_.clear();
         return backtrack;
     }
@@ -618,13 +684,30 @@ private:
 
     // Takes the vertices handed back by closeSegment() again, in order, in a
     // loop rather than by recursion: a replay that closes a segment early
-    // hands back vertices of its own, which go first.
+    // hands back vertices of its own, which go first. While a segment is
+    // open, the next vertices of one band are taken as a run (extendRun(),
+    // the result of extendOne() on each in turn), and the vertex that stops
+    // the run goes through pushBeyondOne(), as push() would take them.
     template <int C>
     void replay() {
         while (!toReplay_.empty()) {
-            const PendingVertex p = toReplay_.back();
-            toReplay_.pop_back();
-            pushOne<C>(p.z, p.v, p.count, p.band);
+            if (open_) {
+                const std::size_t runLength = toReplay_.sameBand(kReplayRun);
+                const std::size_t taken = extendRun<C>(toReplay_.depths(), toReplay_.values<C>(), toReplay_.counts(),
+                                                       runLength, toReplay_.bands()[0]);
+                toReplay_.dropFront(taken);
+                if (taken == runLength) continue;
+            }
+            const float z = toReplay_.depths()[0];
+            double v[kMaxChannels];
+            std::copy(toReplay_.values<C>(), toReplay_.values<C>() + C, v);
+            const std::uint32_t count = toReplay_.counts()[0];
+            const double band = toReplay_.bands()[0];
+            toReplay_.dropFront(1);
+            if (open_)
+                pushBeyondOne<C>(z, v, count, band);
+            else
+                pushOne<C>(z, v, count, band);
         }
     }
 
@@ -658,8 +741,8 @@ private:
         double twiceIntegral[kMaxChannels] = {};
         double inputV[kMaxChannels] = {};
     } balancedPoint_;
-    std::vector<PendingVertex> pending_;
-    std::vector<PendingVertex> toReplay_;  // vertices to take again, the next one last
+    detail::VertexQueue pending_;
+    detail::VertexQueue toReplay_;  // vertices to take again, the next one first
 };
 
 }  // namespace

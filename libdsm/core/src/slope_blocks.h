@@ -58,16 +58,27 @@ static inline double fastInverse(float z, float originZ, double dz) {
     return q * (2.0 - dz * q);
 }
 
+// 1 / dz for a vertex at depth z, dz = z - originZ beyond it: fastInverse()
+// where it applies, else a division.
+static inline double depthInverse(float z, float originZ, double dz) {
+    return (dz >= kLeastFastDepth && dz <= kMostFastDepth) ? fastInverse(z, originZ, dz) : 1.0 / dz;
+}
+
 struct VertexSlopes {
     double top, bottom, dz;
 };
 
+// The bounds of a vertex of value v, dz beyond the origin, with 1 / dz given.
+template <typename T>
+static inline VertexSlopes slopesScaledBy(double inverse, double dz, T v, const SlopeFrame& f) {
+    const double value = static_cast<double>(v);
+    return {(value + f.topOffset) * inverse, (value + f.bottomOffset) * inverse, dz};
+}
+
 template <typename T>
 static inline VertexSlopes vertexSlopes(float z, T v, const SlopeFrame& f) {
     const double dz = static_cast<double>(z) - static_cast<double>(f.originZ);
-    const double inverse = (dz >= kLeastFastDepth && dz <= kMostFastDepth) ? fastInverse(z, f.originZ, dz) : 1.0 / dz;
-    const double value = static_cast<double>(v);
-    return {(value + f.topOffset) * inverse, (value + f.bottomOffset) * inverse, dz};
+    return slopesScaledBy(depthInverse(z, f.originZ, dz), dz, v, f);
 }
 
 // The frame of a vertex with a band of its own (grey RGB input, whose band
