@@ -453,7 +453,7 @@ private:
         if (open_) {
             // A segment that closes at its balanced point hands the vertices
             // after it back to be taken again (replay()): this one goes after
-            // them, so it waits beneath them.
+            // them and before the rest, so it goes to the front first.
             if (backtracks()) toReplay_.pushFront<C>(z, v, count, band);
             if (closeSegment<C>()) return;
         }
