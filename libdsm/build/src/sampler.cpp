@@ -469,6 +469,16 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                         const std::uint32_t nx0 = x >= std::uint32_t(reach) ? x - reach : 0;
                         const std::uint32_t ny0 = y >= std::uint32_t(reach) ? y - reach : 0;
                         const std::uint32_t nx1 = std::min(x + reach + 1, W), ny1 = std::min(y + reach + 1, H);
+                        // The next pixel first uses the samples of sample pixel (x + reach + 1,
+                        // y + reach): their transmittance slots, cold since their band began (a
+                        // slot's first read, of its capacity, stalled on memory), are fetched
+                        // ahead, for writing.
+                        if (x + reach + 1 < sx1 && y + reach < sy1) {
+                            const std::size_t next = (std::size_t(y + reach - sy0) * sw + (x + reach + 1 - sx0)) * spp;
+                            const auto* from = reinterpret_cast<const char*>(transmittances + next);
+                            const auto* to = reinterpret_cast<const char*>(transmittances + next + spp);
+                            for (; from < to; from += 64) __builtin_prefetch(from, 1);
+                        }
                         for (std::uint32_t ny = ny0; ny < ny1; ++ny)
                             for (std::uint32_t nx = nx0; nx < nx1; ++nx) {
                                 const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
