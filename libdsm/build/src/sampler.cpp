@@ -423,9 +423,13 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
             TileWorkspace& ws = workspaces.local();
             const std::size_t sampleCount = sampleTile(tx, ty, {sx0, sy0, sx1, sy1}, ws, stats);
             const std::span<const SampleData> samples(ws.samples.data(), sampleCount);
+            // The index of sample pixel (sx, sy)'s first sample in the band's samples and slots.
+            const auto firstSampleOf = [&](std::uint32_t sx, std::uint32_t sy) {
+                return (std::size_t(sy - sy0) * sw + (sx - sx0)) * spp;
+            };
             for (std::uint32_t y = by0; y < by1; ++y)
                 for (std::uint32_t x = rx0; x < rx1; ++x) {
-                    const auto s = samples.subspan((std::size_t(y - sy0) * sw + (x - sx0)) * spp, spp);
+                    const auto s = samples.subspan(firstSampleOf(x, y), spp);
                     for (const SampleData& d : s) stats.rawVertices += 2 * d.hitCount + d.volume.size();
                     if (options.sampleRays) {
                         ws.ownRays.clear();
@@ -474,14 +478,14 @@ BuildStats buildMap(const Scene& scene, const BuildOptions& given, const std::st
                         // slot's first read, of its capacity, stalled on memory), are fetched
                         // ahead, for writing.
                         if (x + reach + 1 < sx1 && y + reach < sy1) {
-                            const std::size_t next = (std::size_t(y + reach - sy0) * sw + (x + reach + 1 - sx0)) * spp;
+                            const std::size_t next = firstSampleOf(x + reach + 1, y + reach);
                             const auto* from = reinterpret_cast<const char*>(transmittances + next);
                             const auto* to = reinterpret_cast<const char*>(transmittances + next + spp);
                             for (; from < to; from += 64) __builtin_prefetch(from, 1);
                         }
                         for (std::uint32_t ny = ny0; ny < ny1; ++ny)
                             for (std::uint32_t nx = nx0; nx < nx1; ++nx) {
-                                const std::size_t first = (std::size_t(ny - sy0) * sw + (nx - sx0)) * spp;
+                                const std::size_t first = firstSampleOf(nx, ny);
                                 for (std::size_t i = first; i < first + spp; ++i) {
                                     const SampleData& s = samples[i];
                                     const double wgt = weightOf(s.x - cx, s.y - cy);

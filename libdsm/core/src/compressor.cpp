@@ -88,6 +88,16 @@ struct SlopeWindow {
         const double limit = consistent() ? -origin * den[0] : std::numeric_limits<double>::infinity();
         endLimit = Double2{limit, limit};
     }
+
+    // The window of the slopes [lo, hi] themselves (each over a denominator
+    // of 1), from an origin at V = origin.
+    static SlopeWindow ofSlopes(double lo, double hi, double origin) {
+        SlopeWindow w;
+        w.num = Double2{hi, -lo};
+        w.den = Double2{1.0, 1.0};
+        w.limitEnd(origin);
+        return w;
+    }
 };
 
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
@@ -286,7 +296,7 @@ public:
             lo = nextLo;
             if constexpr (withCounts) count += counts[taken];
         }
-        window_[0] = slopeWindow(lo, hi, frame.originV);
+        window_[0] = SlopeWindow::ofSlopes(lo, hi, frame.originV);
         segmentCount_ += count;
         if (taken > 0) lastZ_ = z[taken - 1];
         return taken;
@@ -334,7 +344,7 @@ public:
                 std::min(std::min(feasibleHi, balancedSlope + spread), (previousV + margin - origin) * inverse);
             const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
             if (lowest <= highest) {
-                SlopeWindow w = slopeWindow(lo, hi, origin);
+                SlopeWindow w = SlopeWindow::ofSlopes(lo, hi, origin);
                 notePoint<1>(true, &w, &twiceIntegral, &previousV, z[i], &v[i], vertexCount, band,
                              segmentCount_ + count);
             } else {
@@ -342,21 +352,12 @@ public:
                              segmentCount_ + count);
             }
         }
-        window_[0] = slopeWindow(lo, hi, origin);
+        window_[0] = SlopeWindow::ofSlopes(lo, hi, origin);
         twiceIntegral_[0] = twiceIntegral;
         inputV_[0] = previousV;
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
-    }
-
-    // The window of the slopes [lo, hi] from an origin at V = origin.
-    static SlopeWindow slopeWindow(double lo, double hi, double origin) {
-        SlopeWindow w;
-        w.num = Double2{hi, -lo};
-        w.den = Double2{1.0, 1.0};
-        w.limitEnd(origin);
-        return w;
     }
 
     // extendRun() of one channel whose vertices have bands of their own (grey
