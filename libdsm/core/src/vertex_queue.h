@@ -19,6 +19,8 @@ class VertexQueue {
 public:
     bool empty() const { return head_ == end_; }
     std::size_t size() const { return end_ - head_; }
+    // How many vertices it has room for, at both ends and between.
+    std::size_t capacity() const { return z_.size(); }
     // Empty, with its room kept on both sides.
     void clear() { head_ = end_ = z_.size() / 2; }
 
@@ -80,11 +82,14 @@ private:
 
     // Makes room for at least one more vertex at the back and `front` at
     // the front, keeping the vertices in order (values C a vertex; room for
-    // kMaxChannels a vertex, whatever C).
+    // kMaxChannels a vertex, whatever C). The room to spare is split between
+    // the two ends: a queue that grows at one end keeps growing there, and
+    // room at the other alone would leave it to grow again at once.
     void grow(int C, std::size_t front) {
         const std::size_t n = size(), nc = static_cast<std::size_t>(C);
-        const std::size_t newHead = front + n / 2 + 16;
-        const std::size_t capacity = std::max(2 * z_.size(), newHead + 2 * n + 16);
+        const std::size_t needed = front + n + 1;
+        const std::size_t capacity = std::max(2 * z_.size(), 2 * needed + 32);
+        const std::size_t newHead = front + (capacity - needed) / 2;
         std::vector<float> z(capacity);
         std::vector<double> v(capacity * static_cast<std::size_t>(kMaxChannels));
         std::vector<std::uint32_t> counts(capacity);
