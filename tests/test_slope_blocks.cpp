@@ -7,9 +7,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <cstdint>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "slope_blocks.h"
@@ -104,6 +106,132 @@ TEST(SlopeBlocks, Avx2BlocksTakeWhatVertexByVertexWould) {
     if (!avx2.floats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
     checkVariant(avx2.floats, "AVX2, float values");
     checkVariant(avx2.doubles, "AVX2, double values");
+}
+
+// The compressor's centred walk, vertex by vertex (compressor.cpp,
+// extendCentredRunBySlopes()): the run state after each vertex while the
+// window stays feasible.
+template <typename T>
+std::vector<CentredRun> centredWalk(const std::vector<float>& z, const std::vector<T>& v,
+                                    const std::vector<std::uint32_t>* counts, const CentredFrame& frame,
+                                    CentredRun r) {
+    const double origin = frame.slopes.originV, margin = frame.margin;
+    std::vector<CentredRun> after{r};
+    for (std::size_t i = 0; i < z.size(); ++i) {
+        const double dz = static_cast<double>(z[i]) - static_cast<double>(frame.slopes.originZ);
+        const double inverse = depthInverse(z[i], frame.slopes.originZ, dz);
+        const VertexSlopes s = slopesScaledBy(inverse, dz, v[i], frame.slopes);
+        const double nextHi = std::min(r.hi, s.top), nextLo = std::max(r.lo, s.bottom);
+        if (!feasibleWindow(nextLo, nextHi, origin, dz)) break;
+        r.hi = nextHi;
+        r.lo = nextLo;
+        if (counts) r.count += (*counts)[i];
+        const double value = static_cast<double>(v[i]);
+        r.twiceIntegral += (static_cast<double>(z[i]) - r.previousZ) * (r.previousV + value);
+        r.previousZ = z[i];
+        r.previousV = value;
+        const double feasibleHi = std::min(r.hi, 0.0);
+        const double feasibleLo = std::min(std::max(r.lo, -origin * inverse), feasibleHi);
+        const double balancedSlope = (r.twiceIntegral * inverse - 2.0 * origin) * inverse;
+        const double spread = 2.0 * margin * inverse;
+        const double lowest =
+            std::max(std::max(feasibleLo, balancedSlope - spread), (r.previousV - margin - origin) * inverse);
+        const double highest =
+            std::min(std::min(feasibleHi, balancedSlope + spread), (r.previousV + margin - origin) * inverse);
+        if (lowest <= highest) {
+            r.balancedAt = i;
+            r.balancedLo = r.lo;
+            r.balancedHi = r.hi;
+            r.balancedIntegral = r.twiceIntegral;
+            r.balancedCount = r.count;
+        }
+        after.push_back(r);
+    }
+    return after;
+}
+
+// Equal bit for bit (a zero's sign included).
+void expectSameBits(double a, double b, const std::string& what) {
+    EXPECT_EQ(std::bit_cast<std::uint64_t>(a), std::bit_cast<std::uint64_t>(b)) << what << ": " << a << " " << b;
+}
+
+template <typename T>
+void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std::uint32_t*, std::size_t,
+                                               const CentredFrame&, CentredRun&),
+                         const char* name) {
+    std::mt19937_64 rng(41);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int ended = 0, whole = 0, balancedInBlocks = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const std::size_t n = rng() % 120;
+        const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
+        const double originV = trial % 5 == 0 ? 1.0 : unit(rng);
+        const double band = trial % 7 == 0 ? 1e-9 : 0.2 * unit(rng) + 1e-6;
+        const CentredFrame frame{slopeFrame(originZ, originV, band), 0.1 * band};
+        // A falling input in steps and ramps, flat for long stretches at
+        // times (plateaus, where segments balance).
+        std::vector<float> z(n);
+        std::vector<T> v(n);
+        std::vector<std::uint32_t> counts(n);
+        double depth = originZ + 1e-3 * unit(rng), value = originV;
+        const double fall = trial % 3 == 0 ? 0.002 : 0.05;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (rng() % 3 != 0) depth += 0.05 * unit(rng);
+            if (rng() % 4 != 0) value = std::max(0.0, value - fall * unit(rng));
+            z[i] = static_cast<float>(depth);
+            v[i] = static_cast<T>(value);
+            counts[i] = static_cast<std::uint32_t>(rng() % 5 == 0 ? 0xffffffffu : rng() % 1000);
+        }
+        // An open segment, as after its first vertex, with something already
+        // summed and balanced.
+        const float firstZ = static_cast<float>(originZ + 1e-3);
+        const VertexSlopes first = vertexSlopes(firstZ, originV, frame.slopes);
+        const CentredRun start{first.bottom, first.top, 2e-3 * originV, firstZ, originV, 7, 3, first.bottom,
+                               first.top, 1e-3, 2};
+        for (bool withCounts : {false, true}) {
+            const std::vector<CentredRun> walk = centredWalk(z, v, withCounts ? &counts : nullptr, frame, start);
+            const std::size_t taken = (walk.size() - 1) / 8 * 8;
+            const CentredRun& expected = walk[taken];
+            CentredRun got = start;
+            const std::size_t took = blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, got);
+            const std::string what = std::string(name) + " trial " + std::to_string(trial);
+            ASSERT_EQ(took, taken) << what;
+            expectSameBits(got.lo, expected.lo, what + " lo");
+            expectSameBits(got.hi, expected.hi, what + " hi");
+            expectSameBits(got.twiceIntegral, expected.twiceIntegral, what + " integral");
+            expectSameBits(got.previousZ, expected.previousZ, what + " previous depth");
+            expectSameBits(got.previousV, expected.previousV, what + " previous value");
+            EXPECT_EQ(got.count, expected.count) << what;
+            ASSERT_EQ(got.balancedAt, expected.balancedAt) << what;
+            expectSameBits(got.balancedLo, expected.balancedLo, what + " balanced lo");
+            expectSameBits(got.balancedHi, expected.balancedHi, what + " balanced hi");
+            expectSameBits(got.balancedIntegral, expected.balancedIntegral, what + " balanced integral");
+            EXPECT_EQ(got.balancedCount, expected.balancedCount) << what;
+            if (::testing::Test::HasFailure()) return;
+            if (withCounts) {
+                (taken + 8 <= n ? ended : whole) += 1;
+                if (expected.balancedAt != start.balancedAt) ++balancedInBlocks;
+            }
+        }
+    }
+    // Segments that end within the run, runs taken to their last whole
+    // block, and balanced vertices found in blocks, each many times.
+    EXPECT_GT(ended, 300) << name;
+    EXPECT_GT(whole, 300) << name;
+    EXPECT_GT(balancedInBlocks, 300) << name;
+}
+
+TEST(SlopeBlocks, BaselineCentredBlocksTakeWhatTheWalkWould) {
+    const SlopeBlockVariants baseline = baselineSlopeBlocks();
+    checkCentredVariant(baseline.centredFloats, "baseline, float values");
+    checkCentredVariant(baseline.centredDoubles, "baseline, double values");
+}
+
+TEST(SlopeBlocks, Avx2CentredBlocksTakeWhatTheWalkWould) {
+    const SlopeBlockVariants avx2 = avx2SlopeBlocks();
+    if (!avx2.centredFloats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
+    checkCentredVariant(avx2.centredFloats, "AVX2, float values");
+    checkCentredVariant(avx2.centredDoubles, "AVX2, double values");
 }
 
 TEST(SlopeBlocks, FastInverseIsCloseToTheQuotient) {

@@ -1,6 +1,6 @@
 // The queue of vertices a centred segment takes again (vertex_queue.h,
 // internal): it keeps its vertices in order through any mix of pushes at
-// both ends, drops and growth, and its room stays within a small multiple
+// both ends (one or many at a time), drops and growth, and its room stays within a small multiple
 // of the most vertices it has held.
 #include <gtest/gtest.h>
 
@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <deque>
 #include <random>
+#include <vector>
 
 #include "vertex_queue.h"
 
@@ -58,10 +59,28 @@ void randomOperations(std::uint32_t seed) {
     std::size_t most = 0;
     for (int step = 0; step < 4000; ++step) {
         const std::uint32_t op = rng() % 8;
-        if (op < 3) {
+        if (op < 2) {
             const Vertex x = randomVertex<C>(rng);
-            q.pushBack<C>(x.z, x.v, x.count, x.band);
+            q.pushBack<C>(&x.z, x.v, &x.count, 1, x.band);
             model.push_back(x);
+        } else if (op == 2) {
+            // A stretch of one band at once, with or without counts.
+            const std::size_t n = rng() % 50;
+            const bool withCounts = rng() % 2 == 0;
+            const double band = randomVertex<C>(rng).band;
+            std::vector<float> z(n);
+            std::vector<double> v(n * C);
+            std::vector<std::uint32_t> counts(n);
+            for (std::size_t i = 0; i < n; ++i) {
+                Vertex x = randomVertex<C>(rng);
+                x.band = band;
+                if (!withCounts) x.count = 0;
+                z[i] = x.z;
+                for (int c = 0; c < C; ++c) v[i * C + c] = x.v[c];
+                counts[i] = x.count;
+                model.push_back(x);
+            }
+            q.pushBack<C>(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, band);
         } else if (op < 5) {
             const Vertex x = randomVertex<C>(rng);
             q.pushFront<C>(x.z, x.v, x.count, x.band);
@@ -73,7 +92,7 @@ void randomOperations(std::uint32_t seed) {
             const std::size_t n = rng() % 300;
             for (std::size_t i = 0; i < n; ++i) {
                 const Vertex x = randomVertex<C>(rng);
-                other.pushBack<C>(x.z, x.v, x.count, x.band);
+                other.pushBack<C>(&x.z, x.v, &x.count, 1, x.band);
                 added.push_back(x);
             }
             q.pushFront<C>(other);
@@ -111,7 +130,10 @@ TEST(VertexQueue, RoomStaysBoundedWhenTheFrontGrowsAgainAndAgain) {
     for (std::size_t n = 1; n < 6000; n = n * 5 / 4 + 1) {
         q.pushFront<1>(1.0f, v, 1u, 0.25);
         VertexQueue ahead;
-        for (std::size_t i = 0; i < n; ++i) ahead.pushBack<1>(static_cast<float>(i), v, 0u, 0.25);
+        for (std::size_t i = 0; i < n; ++i) {
+            const float z = static_cast<float>(i);
+            ahead.pushBack<1>(&z, v, nullptr, 1, 0.25);
+        }
         q.pushFront<1>(ahead);
         most = std::max(most, q.size());
         ASSERT_EQ(q.size(), n + 1);

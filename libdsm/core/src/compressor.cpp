@@ -282,10 +282,7 @@ public:
         double hi = window_[0].hi(), lo = window_[0].lo();
         std::uint64_t count = 0;
         std::size_t taken = 0;
-        // Depths never fall along a run, so its first and last bound them all.
-        const bool fastDepths = n >= 8 && static_cast<double>(z[0]) - originZ_ >= detail::kLeastFastDepth &&
-                                static_cast<double>(z[n - 1]) - originZ_ <= detail::kMostFastDepth;
-        if (fastDepths)
+        if (blocksFit(z, n))
             taken = detail::takeSlopeBlocks(z, v, bands, withCounts ? counts : nullptr, n, frame, lo, hi, count);
         for (; taken < n; ++taken) {
             const detail::VertexSlopes s =
@@ -302,60 +299,81 @@ public:
         return taken;
     }
 
+    // Whether a run of n vertices can be taken in blocks of eight: n >= 8 and
+    // every depth difference from the origin in [kLeastFastDepth,
+    // kMostFastDepth]. Depths never fall along a run, so its first and last
+    // bound them all.
+    bool blocksFit(const float* z, std::size_t n) const {
+        return n >= 8 && static_cast<double>(z[0]) - originZ_ >= detail::kLeastFastDepth &&
+               static_cast<double>(z[n - 1]) - originZ_ <= detail::kMostFastDepth;
+    }
+
     // extendRun() for one channel, centred, with a band > 0: the window as
     // two slopes, each vertex's bounds as vertexSlopes() makes them (as
     // extendRunBySlopes() takes them one by one), and whether the segment can
     // be balanced ending at each vertex worked out in slopes too, with the
     // vertex's 1 / dz instead of the divisions of balanced(): the same test.
+    // Whole blocks of eight go at once where they can (takeCentredBlocks(),
+    // the same arithmetic), the rest one by one. The run's last balanced
+    // vertex is kept by its index, and the vertices after it go to pending_
+    // together at the end: what notePoint() would leave, vertex by vertex.
     template <bool withCounts, typename T>
     std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
                                          double band) {
-        const detail::SlopeFrame frame = detail::slopeFrame(originZ_, originV_[0], band);
-        const double origin = frame.originV, margin = kBalance * band_;
-        double hi = window_[0].hi(), lo = window_[0].lo();
-        double twiceIntegral = twiceIntegral_[0], previousV = inputV_[0];
-        double previousZ = lastZ_;
-        std::uint64_t count = 0;
+        if (n == 0) return 0;
+        const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
+        const double origin = frame.slopes.originV, margin = frame.margin;
+        detail::CentredRun r{window_[0].lo(), window_[0].hi(), twiceIntegral_[0], lastZ_, inputV_[0], 0,
+                             detail::kNotBalanced, 0.0, 0.0, 0.0, 0};
         std::size_t i = 0;
+        if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
         for (; i < n; ++i) {
             // vertexSlopes(), keeping its 1 / dz for the balance below.
             const double dz = static_cast<double>(z[i]) - static_cast<double>(originZ_);
             const double inverse = detail::depthInverse(z[i], originZ_, dz);
-            const detail::VertexSlopes s = detail::slopesScaledBy(inverse, dz, v[i], frame);
-            const double nextHi = std::min(hi, s.top), nextLo = std::max(lo, s.bottom);
+            const detail::VertexSlopes s = detail::slopesScaledBy(inverse, dz, v[i], frame.slopes);
+            const double nextHi = std::min(r.hi, s.top), nextLo = std::max(r.lo, s.bottom);
             if (!detail::feasibleWindow(nextLo, nextHi, origin, dz)) break;
-            hi = nextHi;
-            lo = nextLo;
-            if constexpr (withCounts) count += counts[i];
+            r.hi = nextHi;
+            r.lo = nextLo;
+            if constexpr (withCounts) r.count += counts[i];
             const double value = static_cast<double>(v[i]);
-            twiceIntegral += (static_cast<double>(z[i]) - previousZ) * (previousV + value);
-            previousZ = z[i];
-            previousV = value;
+            r.twiceIntegral += (static_cast<double>(z[i]) - r.previousZ) * (r.previousV + value);
+            r.previousZ = z[i];
+            r.previousV = value;
             // balanced(): of the feasible slopes, one within 2 * margin / dz of
             // the balanced slope (twiceIntegral - 2 origin dz) / dz^2 whose end
             // is within margin of the input.
-            const double feasibleHi = std::min(hi, 0.0);
-            const double feasibleLo = std::min(std::max(lo, -origin * inverse), feasibleHi);
-            const double balancedSlope = (twiceIntegral * inverse - 2.0 * origin) * inverse;
+            const double feasibleHi = std::min(r.hi, 0.0);
+            const double feasibleLo = std::min(std::max(r.lo, -origin * inverse), feasibleHi);
+            const double balancedSlope = (r.twiceIntegral * inverse - 2.0 * origin) * inverse;
             const double spread = 2.0 * margin * inverse;
             const double lowest =
-                std::max(std::max(feasibleLo, balancedSlope - spread), (previousV - margin - origin) * inverse);
+                std::max(std::max(feasibleLo, balancedSlope - spread), (r.previousV - margin - origin) * inverse);
             const double highest =
-                std::min(std::min(feasibleHi, balancedSlope + spread), (previousV + margin - origin) * inverse);
-            const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
+                std::min(std::min(feasibleHi, balancedSlope + spread), (r.previousV + margin - origin) * inverse);
             if (lowest <= highest) {
-                SlopeWindow w = SlopeWindow::ofSlopes(lo, hi, origin);
-                notePoint<1>(true, &w, &twiceIntegral, &previousV, z[i], &v[i], vertexCount, band,
-                             segmentCount_ + count);
-            } else {
-                notePoint<1>(false, nullptr, &twiceIntegral, &previousV, z[i], &v[i], vertexCount, band,
-                             segmentCount_ + count);
+                r.balancedAt = i;
+                r.balancedLo = r.lo;
+                r.balancedHi = r.hi;
+                r.balancedIntegral = r.twiceIntegral;
+                r.balancedCount = r.count;
             }
         }
-        window_[0] = SlopeWindow::ofSlopes(lo, hi, origin);
-        twiceIntegral_[0] = twiceIntegral;
-        inputV_[0] = previousV;
-        segmentCount_ += count;
+        std::size_t waiting = 0;  // the first of the run's vertices to wait in pending_
+        if (r.balancedAt != detail::kNotBalanced) {
+            const std::size_t b = r.balancedAt;
+            const SlopeWindow w = SlopeWindow::ofSlopes(r.balancedLo, r.balancedHi, origin);
+            const double inputV = static_cast<double>(v[b]);
+            notePoint<1>(true, &w, &r.balancedIntegral, &inputV, z[b], &v[b], withCounts ? counts[b] : 0u, band,
+                         segmentCount_ + r.balancedCount);
+            waiting = b + 1;
+        }
+        noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
+        window_[0] = SlopeWindow::ofSlopes(r.lo, r.hi, origin);
+        twiceIntegral_[0] = r.twiceIntegral;
+        inputV_[0] = r.previousV;
+        segmentCount_ += r.count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
     }
@@ -584,17 +602,26 @@ private:
                 b.inputV[c] = inputV[c];
             });
             pending_.clear();
-        } else if (balancedPoint_.valid) {
-            if (pending_.size() == kMostPending) {
-                // Too far past it: the segment closes where its window does,
-                // so that taking vertices again stays within a bounded share
-                // of the work.
-                balancedPoint_.valid = false;
-                pending_.clear();
-                return;
-            }
-            pending_.pushBack<C>(z, v, count, band);
+        } else {
+            noteUnbalanced<C>(&z, v, &count, 1, band);
         }
+    }
+
+    // notePoint() of n vertices in a row at none of which the segment is
+    // balanced (counts null for counts of 0): each waits in pending_ while
+    // the segment has a balanced point.
+    template <int C, typename T>
+    void noteUnbalanced(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+        if (!balancedPoint_.valid || n == 0) return;
+        if (pending_.size() + n > kMostPending) {
+            // Too far past it: the segment closes where its window does, so
+            // that taking vertices again stays within a bounded share of the
+            // work.
+            balancedPoint_.valid = false;
+            pending_.clear();
+            return;
+        }
+        pending_.pushBack<C>(z, v, counts, n, band);
     }
 
     // The centred end slope within [lo, hi]: of the slopes whose mean error

@@ -8,13 +8,15 @@ namespace dsm::detail {
 SlopeBlockVariants avx2SlopeBlocksCompiled();  // slope_blocks_avx2.cpp
 #endif
 
-SlopeBlockVariants baselineSlopeBlocks() { return {&slopeBlocks<float>, &slopeBlocks<double>}; }
+SlopeBlockVariants baselineSlopeBlocks() {
+    return {&slopeBlocks<float>, &slopeBlocks<double>, &centredBlocks<float>, &centredBlocks<double>};
+}
 
 SlopeBlockVariants avx2SlopeBlocks() {
 #ifdef DSM_SLOPE_BLOCKS_AVX2
     if (__builtin_cpu_supports("avx2")) return avx2SlopeBlocksCompiled();
 #endif
-    return {nullptr, nullptr};
+    return {nullptr, nullptr, nullptr, nullptr};
 }
 
 namespace {
@@ -37,6 +39,16 @@ std::size_t takeSlopeBlocks(const float* z, const float* v, const double* bands,
 std::size_t takeSlopeBlocks(const float* z, const double* v, const double* bands, const std::uint32_t* counts,
                             std::size_t n, const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
     return chosenSlopeBlocks().doubles(z, v, bands, counts, n, frame, lo, hi, count);
+}
+
+std::size_t takeCentredBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,
+                              const CentredFrame& frame, CentredRun& run) {
+    return chosenSlopeBlocks().centredFloats(z, v, counts, n, frame, run);
+}
+
+std::size_t takeCentredBlocks(const float* z, const double* v, const std::uint32_t* counts, std::size_t n,
+                              const CentredFrame& frame, CentredRun& run) {
+    return chosenSlopeBlocks().centredDoubles(z, v, counts, n, frame, run);
 }
 
 }  // namespace dsm::detail

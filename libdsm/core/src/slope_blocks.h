@@ -103,16 +103,61 @@ DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const double* v,
                                                 const std::uint32_t* counts, std::size_t n, const SlopeFrame& frame,
                                                 double& lo, double& hi, std::uint64_t& count);
 
-// takeSlopeBlocks() on the baseline instruction set, and on AVX2 (null where
-// the library was built without it, or the processor lacks it): for the
-// tests, which check that the two agree bit for bit.
+// A centred segment of one channel along a run (the compressor's
+// extendCentredRunBySlopes()): its window [lo, hi], twice the input's
+// integral from the origin (the trapezoids' halves left out), the last
+// vertex taken (depth and value), the counts taken, and the last vertex of
+// the run at which the segment can be balanced, with the window, integral
+// and counts there (balancedAt is kNotBalanced while there is none).
+struct CentredRun {
+    double lo, hi;
+    double twiceIntegral;
+    double previousZ, previousV;
+    std::uint64_t count;
+    std::size_t balancedAt;
+    double balancedLo, balancedHi, balancedIntegral;
+    std::uint64_t balancedCount;
+};
+inline constexpr std::size_t kNotBalanced = ~std::size_t{0};
+
+// What a centred segment tests at each vertex: the frame, and the margin by
+// which a balanced line may miss the input's mean and its last value.
+struct CentredFrame {
+    SlopeFrame slopes;
+    double margin;
+};
+
+// Takes the leading whole blocks of eight vertices of a run that keep the
+// window feasible at their last vertex, as the compressor's centred walk
+// would take them one by one: the window narrowed by each vertex's bounds,
+// the integral and the counts (when counts is not null) summed in order,
+// and each vertex tested for balance; the run state ends as that walk
+// leaves it, bit for bit. Returns how many vertices it took, a multiple of
+// eight: the block where the segment ends and the run's last vertices are
+// left to the walk. Preconditions as takeSlopeBlocks()'s (depths never
+// fall, every depth difference from the origin in [kLeastFastDepth,
+// kMostFastDepth]).
+DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const float* v, const std::uint32_t* counts,
+                                                  std::size_t n, const CentredFrame& frame, CentredRun& run);
+DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const double* v, const std::uint32_t* counts,
+                                                  std::size_t n, const CentredFrame& frame, CentredRun& run);
+
+// takeSlopeBlocks() and takeCentredBlocks() on the baseline instruction set,
+// and on AVX2 (null where the library was built without it, or the processor
+// lacks it): for the tests, which check that the two agree bit for bit.
 using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const double*, const std::uint32_t*,
                                             std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
 using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const double*, const std::uint32_t*,
                                              std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
+using CentredBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
+                                              const CentredFrame&, CentredRun&);
+using CentredBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
+                                               const CentredFrame&, CentredRun&);
 struct SlopeBlockVariants {
     SlopeBlocksOfFloats floats;
     SlopeBlocksOfDoubles doubles;
+    CentredBlocksOfFloats centredFloats;
+    CentredBlocksOfDoubles centredDoubles;
 };
 DSM_TESTED_INTERNAL SlopeBlockVariants baselineSlopeBlocks();
 DSM_TESTED_INTERNAL SlopeBlockVariants avx2SlopeBlocks();

@@ -1,4 +1,4 @@
-// takeSlopeBlocks() compiled for AVX2 (this file alone is built with -mavx2;
+// takeSlopeBlocks() and takeCentredBlocks() compiled for AVX2 (this file alone is built with -mavx2;
 // slope_blocks.cpp calls it only on processors that have it).
 #include "slope_blocks.h"
 
@@ -6,6 +6,8 @@
 
 namespace dsm::detail {
 
-SlopeBlockVariants avx2SlopeBlocksCompiled() { return {&slopeBlocks<float>, &slopeBlocks<double>}; }
+SlopeBlockVariants avx2SlopeBlocksCompiled() {
+    return {&slopeBlocks<float>, &slopeBlocks<double>, &centredBlocks<float>, &centredBlocks<double>};
+}
 
 }  // namespace dsm::detail

@@ -169,6 +169,151 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
     return i;
 }
 
+// The least of each lane and the lanes before it, and the greatest (through
+// a reference, as widen()).
+[[gnu::always_inline]] inline void leastSoFar(const Double4& x, Double4& out) {
+    constexpr double kInf = __builtin_inf();
+    const Double4 none = {kInf, kInf, kInf, kInf};
+    const Double4 shifted = __builtin_shufflevector(none, x, 0, 4, 5, 6);
+    const Double4 y = shifted < x ? shifted : x;
+    const Double4 shiftedTwice = __builtin_shufflevector(none, y, 0, 1, 4, 5);
+    out = shiftedTwice < y ? shiftedTwice : y;
+}
+[[gnu::always_inline]] inline void greatestSoFar(const Double4& x, Double4& out) {
+    constexpr double kInf = __builtin_inf();
+    const Double4 none = {-kInf, -kInf, -kInf, -kInf};
+    const Double4 shifted = __builtin_shufflevector(none, x, 0, 4, 5, 6);
+    const Double4 y = shifted > x ? shifted : x;
+    const Double4 shiftedTwice = __builtin_shufflevector(none, y, 0, 1, 4, 5);
+    out = shiftedTwice > y ? shiftedTwice : y;
+}
+
+// takeCentredBlocks(), a block of eight vertices at a time, in two halves of
+// four lanes. Each vertex's 1 / dz and bounds, the trapezoid it adds to the
+// integral and the balance test are worked out four lanes at once, by the
+// operations of the compressor's centred walk (compressor.cpp) in the same
+// order. The window after each vertex is the least top and the greatest
+// bottom so far, exact in any order, so it is taken across the lanes; the
+// integral is summed lane after lane, as the walk sums it (a sum's rounding
+// depends on its order). A block is taken when the window after it is
+// feasible at its last vertex.
+template <bool withCounts, typename T>
+std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                            const CentredFrame& f, CentredRun& run) {
+    const float originZ = f.slopes.originZ;
+    const double origin = f.slopes.originV, margin = f.margin;
+    const Double4 topOffset = {f.slopes.topOffset, f.slopes.topOffset, f.slopes.topOffset, f.slopes.topOffset};
+    const Double4 bottomOffset = {f.slopes.bottomOffset, f.slopes.bottomOffset, f.slopes.bottomOffset,
+                                  f.slopes.bottomOffset};
+    const Double4 zero = {};
+    CentredRun r = run;  // a local: stores through `run` could alias the input as far as the compiler knows
+    std::size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        Double4 depth[2], value[2], inverse[2], windowLo[2], windowHi[2], integral[2];
+        double lo = r.lo, hi = r.hi, twiceIntegral = r.twiceIntegral, lastDz = 0.0;
+        Double4 depthBefore = {r.previousZ, r.previousZ, r.previousZ, r.previousZ};
+        Double4 valueBefore = {r.previousV, r.previousV, r.previousV, r.previousV};
+        for (std::size_t h = 0; h < 2; ++h) {
+            Float4 depths;
+            std::memcpy(&depths, z + i + 4 * h, sizeof depths);
+            widen(depths, depth[h]);
+            const Double4 dz = depth[h] - static_cast<double>(originZ);
+            // fastInverse(), four lanes at once: the same operations.
+            Double4 q;
+            widen(1.0f / (depths - originZ), q);
+            inverse[h] = q * (2.0 - dz * q);
+            loadValues(v + i + 4 * h, value[h]);
+            lastDz = dz[3];
+            const Double4 tops = (value[h] + topOffset) * inverse[h];
+            const Double4 bottoms = (value[h] + bottomOffset) * inverse[h];
+            Double4 hiSoFar, loSoFar;
+            leastSoFar(tops, hiSoFar);
+            greatestSoFar(bottoms, loSoFar);
+            const Double4 hiBefore = {hi, hi, hi, hi}, loBefore = {lo, lo, lo, lo};
+            windowHi[h] = hiSoFar < hiBefore ? hiSoFar : hiBefore;  // std::min(hi, top) from vertex to vertex
+            windowLo[h] = loBefore < loSoFar ? loSoFar : loBefore;  // std::max(lo, bottom)
+            hi = windowHi[h][3];
+            lo = windowLo[h][3];
+            // (z - previousZ) * (previousV + value), then summed in order.
+            const Double4 previousDepth = __builtin_shufflevector(depthBefore, depth[h], 3, 4, 5, 6);
+            const Double4 previousValue = __builtin_shufflevector(valueBefore, value[h], 3, 4, 5, 6);
+            const Double4 trapezoid = (depth[h] - previousDepth) * (previousValue + value[h]);
+            const double sum0 = twiceIntegral + trapezoid[0], sum1 = sum0 + trapezoid[1];
+            const double sum2 = sum1 + trapezoid[2], sum3 = sum2 + trapezoid[3];
+            integral[h] = Double4{sum0, sum1, sum2, sum3};
+            twiceIntegral = sum3;
+            depthBefore = depth[h];
+            valueBefore = value[h];
+        }
+        // The window after the block is feasible at its last vertex, so at
+        // every vertex of it (feasibleWindow()).
+        if (!feasibleWindow(lo, hi, origin, lastDz)) break;
+        // balanced(), as the walk tests it: of the feasible slopes, one within
+        // 2 margin / dz of the balanced slope whose end is within margin of
+        // the input. Each select is std::min's or std::max's, its operands
+        // in the walk's order.
+        unsigned balanced = 0;
+        for (std::size_t h = 0; h < 2; ++h) {
+            const Double4 inv = inverse[h];
+            const Double4 feasibleHi = zero < windowHi[h] ? zero : windowHi[h];
+            const Double4 aboveZero = (-origin) * inv;
+            const Double4 raised = windowLo[h] < aboveZero ? aboveZero : windowLo[h];
+            const Double4 feasibleLo = feasibleHi < raised ? feasibleHi : raised;
+            const Double4 balancedSlope = (integral[h] * inv - 2.0 * origin) * inv;
+            const Double4 spread = (2.0 * margin) * inv;
+            const Double4 belowBalance = balancedSlope - spread, aboveBalance = balancedSlope + spread;
+            const Double4 endLow = ((value[h] - margin) - origin) * inv;
+            const Double4 endHigh = ((value[h] + margin) - origin) * inv;
+            const Double4 lowestOfTwo = feasibleLo < belowBalance ? belowBalance : feasibleLo;
+            const Double4 lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
+            const Double4 highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
+            const Double4 highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
+            const auto ok = lowest <= highest;
+            for (std::size_t lane = 0; lane < 4; ++lane)
+                balanced |= static_cast<unsigned>(ok[lane] != 0) << (4 * h + lane);
+        }
+        // The block's last balanced vertex, taken by selects: whether a block
+        // has one follows the input too closely for a branch to predict.
+        const std::size_t k = 31 - static_cast<std::size_t>(__builtin_clz(balanced | 1u));
+        const bool any = balanced != 0;
+        std::uint64_t countAfter = r.count;
+        if constexpr (withCounts) {
+            Count4 c[2];
+            std::memcpy(c, counts + i, sizeof c);
+            alignas(32) std::uint64_t sums[8];
+            Sum4 sum = {r.count, r.count, r.count, r.count};
+            for (std::size_t h = 0; h < 2; ++h) {
+                // The counts so far in each lane (integers: exact in any order).
+                const Sum4 x = __builtin_convertvector(c[h], Sum4), none = {};
+                const Sum4 y = x + __builtin_shufflevector(none, x, 0, 4, 5, 6);
+                const Sum4 soFar = y + __builtin_shufflevector(none, y, 0, 1, 4, 5);
+                sum = soFar + Sum4{sum[3], sum[3], sum[3], sum[3]};
+                std::memcpy(sums + 4 * h, &sum, sizeof sum);
+            }
+            countAfter = sums[k];
+            r.count = sums[7];
+        }
+        r.balancedAt = any ? i + k : r.balancedAt;
+        r.balancedLo = any ? windowLo[k / 4][k % 4] : r.balancedLo;
+        r.balancedHi = any ? windowHi[k / 4][k % 4] : r.balancedHi;
+        r.balancedIntegral = any ? integral[k / 4][k % 4] : r.balancedIntegral;
+        r.balancedCount = any ? countAfter : r.balancedCount;
+        r.lo = lo;
+        r.hi = hi;
+        r.twiceIntegral = twiceIntegral;
+        r.previousZ = depth[1][3];
+        r.previousV = value[1][3];
+    }
+    run = r;
+    return i;
+}
+
+template <typename T>
+std::size_t centredBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                          const CentredFrame& f, CentredRun& run) {
+    return counts ? centredBlocksOf<true>(z, v, counts, n, f, run) : centredBlocksOf<false>(z, v, counts, n, f, run);
+}
+
 template <typename T>
 std::size_t slopeBlocks(const float* z, const T* v, const double* bands, const std::uint32_t* counts, std::size_t n,
                         const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {

@@ -44,10 +44,14 @@ public:
 
     void dropFront(std::size_t n) { head_ += n; }
 
+    // Puts n vertices (values C each; counts null for counts of 0), all of
+    // one band, after the others.
     template <int C, typename T>
-    void pushBack(float z, const T* v, std::uint32_t count, double band) {
-        if (end_ == z_.size()) grow(C, 0);
-        put<C>(end_++, z, v, count, band);
+    void pushBack(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+        while (z_.size() - end_ < n) grow(C, 0);
+        for (std::size_t i = 0; i < n; ++i)
+            put<C>(end_ + i, z[i], v + i * static_cast<std::size_t>(C), counts ? counts[i] : 0u, band);
+        end_ += n;
     }
 
     // Puts one vertex ahead of the others.
