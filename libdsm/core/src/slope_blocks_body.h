@@ -48,6 +48,17 @@ inline double greater(double a, double b) { return b > a ? b : a; }
 inline double leastLane(const Double4& d) { return lesser(lesser(d[0], d[1]), lesser(d[2], d[3])); }
 inline double greatestLane(const Double4& d) { return greater(greater(d[0], d[1]), greater(d[2], d[3])); }
 
+// One bit for each lane of a comparison's result that holds (lane 0 lowest).
+template <typename Mask>
+[[gnu::always_inline]] inline unsigned laneBits(const Mask& m) {
+#ifdef __AVX__
+    return static_cast<unsigned>(_mm256_movemask_pd(reinterpret_cast<__m256d>(m)));
+#else
+    return static_cast<unsigned>(m[0] != 0) | static_cast<unsigned>(m[1] != 0) << 1 |
+           static_cast<unsigned>(m[2] != 0) << 2 | static_cast<unsigned>(m[3] != 0) << 3;
+#endif
+}
+
 // Eight vertices' least top slope and greatest bottom slope, four lanes each,
 // and the last vertex's depth beyond the origin.
 struct EightSlopes {
@@ -213,6 +224,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
         double lo = r.lo, hi = r.hi, twiceIntegral = r.twiceIntegral, lastDz = 0.0;
         Double4 depthBefore = {r.previousZ, r.previousZ, r.previousZ, r.previousZ};
         Double4 valueBefore = {r.previousV, r.previousV, r.previousV, r.previousV};
+#pragma GCC unroll 2
         for (std::size_t h = 0; h < 2; ++h) {
             Float4 depths;
             std::memcpy(&depths, z + i + 4 * h, sizeof depths);
@@ -253,6 +265,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
         // the input. Each select is std::min's or std::max's, its operands
         // in the walk's order.
         unsigned balanced = 0;
+#pragma GCC unroll 2
         for (std::size_t h = 0; h < 2; ++h) {
             const Double4 inv = inverse[h];
             const Double4 feasibleHi = zero < windowHi[h] ? zero : windowHi[h];
@@ -268,9 +281,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             const Double4 lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
             const Double4 highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
             const Double4 highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
-            const auto ok = lowest <= highest;
-            for (std::size_t lane = 0; lane < 4; ++lane)
-                balanced |= static_cast<unsigned>(ok[lane] != 0) << (4 * h + lane);
+            balanced |= laneBits(lowest <= highest) << (4 * h);
         }
         // The block's last balanced vertex, taken by selects: whether a block
         // has one follows the input too closely for a branch to predict.
@@ -282,6 +293,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             std::memcpy(c, counts + i, sizeof c);
             alignas(32) std::uint64_t sums[8];
             Sum4 sum = {r.count, r.count, r.count, r.count};
+#pragma GCC unroll 2
             for (std::size_t h = 0; h < 2; ++h) {
                 // The counts so far in each lane (integers: exact in any order).
                 const Sum4 x = __builtin_convertvector(c[h], Sum4), none = {};
