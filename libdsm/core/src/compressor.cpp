@@ -317,8 +317,10 @@ public:
     // the same arithmetic), the rest one by one. The run's last balanced
     // vertex is kept by its index, and the vertices after it go to pending_
     // together at the end: what notePoint() would leave, vertex by vertex.
+    // Not inlined: extendOne() would otherwise carry all of it into the
+    // greedy rule's vertex-by-vertex push().
     template <bool withCounts, typename T>
-    std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+    [[gnu::noinline]] std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
                                          double band) {
         if (n == 0) return 0;
         const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
