@@ -320,8 +320,8 @@ public:
     // Not inlined: extendOne() would otherwise carry all of it into the
     // greedy rule's vertex-by-vertex push().
     template <bool withCounts, typename T>
-    [[gnu::noinline]] std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
-                                         double band) {
+    [[gnu::noinline]] std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts,
+                                                           std::size_t n, double band) {
         if (n == 0) return 0;
         const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
         const double origin = frame.slopes.originV, margin = frame.margin;

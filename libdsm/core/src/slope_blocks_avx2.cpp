@@ -1,5 +1,6 @@
-// takeSlopeBlocks() and takeCentredBlocks() compiled for AVX2 (this file alone is built with -mavx2;
-// slope_blocks.cpp calls it only on processors that have it).
+// takeSlopeBlocks() and takeCentredBlocks() compiled for AVX2 (this file
+// alone is built with -mavx2; slope_blocks.cpp calls it only on processors
+// that have it).
 #include "slope_blocks.h"
 
 #include "slope_blocks_body.h"
