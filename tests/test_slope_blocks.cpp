@@ -108,43 +108,15 @@ TEST(SlopeBlocks, Avx2BlocksTakeWhatVertexByVertexWould) {
     checkVariant(avx2.doubles, "AVX2, double values");
 }
 
-// The compressor's centred walk, vertex by vertex (compressor.cpp,
-// extendCentredRunBySlopes()): the run state after each vertex while the
-// window stays feasible.
+// The compressor's centred walk, vertex by vertex (takeCentredVertex()):
+// the run state after each vertex while the window stays feasible.
 template <typename T>
 std::vector<CentredRun> centredWalk(const std::vector<float>& z, const std::vector<T>& v,
                                     const std::vector<std::uint32_t>* counts, const CentredFrame& frame,
                                     CentredRun r) {
-    const double origin = frame.slopes.originV, margin = frame.margin;
     std::vector<CentredRun> after{r};
     for (std::size_t i = 0; i < z.size(); ++i) {
-        const double dz = static_cast<double>(z[i]) - static_cast<double>(frame.slopes.originZ);
-        const double inverse = depthInverse(z[i], frame.slopes.originZ, dz);
-        const VertexSlopes s = slopesScaledBy(inverse, dz, v[i], frame.slopes);
-        const double nextHi = std::min(r.hi, s.top), nextLo = std::max(r.lo, s.bottom);
-        if (!feasibleWindow(nextLo, nextHi, origin, dz)) break;
-        r.hi = nextHi;
-        r.lo = nextLo;
-        if (counts) r.count += (*counts)[i];
-        const double value = static_cast<double>(v[i]);
-        r.twiceIntegral += (static_cast<double>(z[i]) - r.previousZ) * (r.previousV + value);
-        r.previousZ = z[i];
-        r.previousV = value;
-        const double feasibleHi = std::min(r.hi, 0.0);
-        const double feasibleLo = std::min(std::max(r.lo, -origin * inverse), feasibleHi);
-        const double balancedSlope = (r.twiceIntegral * inverse - 2.0 * origin) * inverse;
-        const double spread = 2.0 * margin * inverse;
-        const double lowest =
-            std::max(std::max(feasibleLo, balancedSlope - spread), (r.previousV - margin - origin) * inverse);
-        const double highest =
-            std::min(std::min(feasibleHi, balancedSlope + spread), (r.previousV + margin - origin) * inverse);
-        if (lowest <= highest) {
-            r.balancedAt = i;
-            r.balancedLo = r.lo;
-            r.balancedHi = r.hi;
-            r.balancedIntegral = r.twiceIntegral;
-            r.balancedCount = r.count;
-        }
+        if (!takeCentredVertex(z[i], v[i], counts ? (*counts)[i] : 0u, i, frame, r)) break;
         after.push_back(r);
     }
     return after;

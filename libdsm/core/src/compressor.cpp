@@ -312,9 +312,9 @@ public:
     // two slopes, each vertex's bounds as vertexSlopes() makes them (as
     // extendRunBySlopes() takes them one by one), and whether the segment can
     // be balanced ending at each vertex worked out in slopes too, with the
-    // vertex's 1 / dz instead of the divisions of balanced(): the same test.
-    // Whole blocks of eight go at once where they can (takeCentredBlocks(),
-    // the same arithmetic), the rest one by one. The run's last balanced
+    // vertex's 1 / dz instead of the divisions of balanced(): the same test
+    // (takeCentredVertex()). Whole blocks of eight go at once where they can
+    // (takeCentredBlocks(), the same arithmetic), the rest one by one. The run's last balanced
     // vertex is kept by its index, and the vertices after it go to pending_
     // together at the end: what notePoint() would leave, vertex by vertex.
     // Not inlined: extendOne() would otherwise carry all of it into the
@@ -324,44 +324,13 @@ public:
                                                            std::size_t n, double band) {
         if (n == 0) return 0;
         const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
-        const double origin = frame.slopes.originV, margin = frame.margin;
+        const double origin = frame.slopes.originV;
         detail::CentredRun r{window_[0].lo(), window_[0].hi(), twiceIntegral_[0], lastZ_, inputV_[0], 0,
                              detail::kNotBalanced, 0.0, 0.0, 0.0, 0};
         std::size_t i = 0;
         if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
-        for (; i < n; ++i) {
-            // vertexSlopes(), keeping its 1 / dz for the balance below.
-            const double dz = static_cast<double>(z[i]) - static_cast<double>(originZ_);
-            const double inverse = detail::depthInverse(z[i], originZ_, dz);
-            const detail::VertexSlopes s = detail::slopesScaledBy(inverse, dz, v[i], frame.slopes);
-            const double nextHi = std::min(r.hi, s.top), nextLo = std::max(r.lo, s.bottom);
-            if (!detail::feasibleWindow(nextLo, nextHi, origin, dz)) break;
-            r.hi = nextHi;
-            r.lo = nextLo;
-            if constexpr (withCounts) r.count += counts[i];
-            const double value = static_cast<double>(v[i]);
-            r.twiceIntegral += (static_cast<double>(z[i]) - r.previousZ) * (r.previousV + value);
-            r.previousZ = z[i];
-            r.previousV = value;
-            // balanced(): of the feasible slopes, one within 2 * margin / dz of
-            // the balanced slope (twiceIntegral - 2 origin dz) / dz^2 whose end
-            // is within margin of the input.
-            const double feasibleHi = std::min(r.hi, 0.0);
-            const double feasibleLo = std::min(std::max(r.lo, -origin * inverse), feasibleHi);
-            const double balancedSlope = (r.twiceIntegral * inverse - 2.0 * origin) * inverse;
-            const double spread = 2.0 * margin * inverse;
-            const double lowest =
-                std::max(std::max(feasibleLo, balancedSlope - spread), (r.previousV - margin - origin) * inverse);
-            const double highest =
-                std::min(std::min(feasibleHi, balancedSlope + spread), (r.previousV + margin - origin) * inverse);
-            if (lowest <= highest) {
-                r.balancedAt = i;
-                r.balancedLo = r.lo;
-                r.balancedHi = r.hi;
-                r.balancedIntegral = r.twiceIntegral;
-                r.balancedCount = r.count;
-            }
-        }
+        for (; i < n; ++i)
+            if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
         std::size_t waiting = 0;  // the first of the run's vertices to wait in pending_
         if (r.balancedAt != detail::kNotBalanced) {
             const std::size_t b = r.balancedAt;

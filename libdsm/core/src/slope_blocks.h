@@ -127,9 +127,56 @@ struct CentredFrame {
     double margin;
 };
 
+// One step of the compressor's centred walk: takes vertex `index` of a run
+// (depth z, value v, count) into the run state when the window narrowed by
+// its bounds stays feasible, and tests whether the segment can be balanced
+// ending there (balanced(): of the feasible slopes, one within 2 margin / dz
+// of the balanced slope (twiceIntegral - 2 origin dz) / dz^2 whose end is
+// within margin of the input). Returns false, the state untouched, when the
+// vertex leaves no feasible slope.
+template <typename T>
+static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::size_t index, const CentredFrame& f,
+                                     CentredRun& r) {
+    const double origin = f.slopes.originV, margin = f.margin;
+    // vertexSlopes(), keeping its 1 / dz for the balance below.
+    const double dz = static_cast<double>(z) - static_cast<double>(f.slopes.originZ);
+    const double inverse = depthInverse(z, f.slopes.originZ, dz);
+    const VertexSlopes s = slopesScaledBy(inverse, dz, v, f.slopes);
+    const double nextHi = s.top < r.hi ? s.top : r.hi, nextLo = r.lo < s.bottom ? s.bottom : r.lo;
+    if (!feasibleWindow(nextLo, nextHi, origin, dz)) return false;
+    r.hi = nextHi;
+    r.lo = nextLo;
+    r.count += count;
+    const double value = static_cast<double>(v);
+    r.twiceIntegral += (static_cast<double>(z) - r.previousZ) * (r.previousV + value);
+    r.previousZ = z;
+    r.previousV = value;
+    // Each select is std::min's or std::max's, its operands in that order.
+    const double feasibleHi = 0.0 < r.hi ? 0.0 : r.hi;
+    const double aboveZero = -origin * inverse;
+    const double raised = r.lo < aboveZero ? aboveZero : r.lo;
+    const double feasibleLo = feasibleHi < raised ? feasibleHi : raised;
+    const double balancedSlope = (r.twiceIntegral * inverse - 2.0 * origin) * inverse;
+    const double spread = 2.0 * margin * inverse;
+    const double belowBalance = balancedSlope - spread, aboveBalance = balancedSlope + spread;
+    const double endLow = (value - margin - origin) * inverse, endHigh = (value + margin - origin) * inverse;
+    const double lowestOfTwo = feasibleLo < belowBalance ? belowBalance : feasibleLo;
+    const double lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
+    const double highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
+    const double highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
+    if (lowest <= highest) {
+        r.balancedAt = index;
+        r.balancedLo = r.lo;
+        r.balancedHi = r.hi;
+        r.balancedIntegral = r.twiceIntegral;
+        r.balancedCount = r.count;
+    }
+    return true;
+}
+
 // Takes the leading whole blocks of eight vertices of a run that keep the
-// window feasible at their last vertex, as the compressor's centred walk
-// would take them one by one: the window narrowed by each vertex's bounds,
+// window feasible at their last vertex, as takeCentredVertex() would take
+// them one by one: the window narrowed by each vertex's bounds,
 // the integral and the counts (when counts is not null) summed in order,
 // and each vertex tested for balance; the run state ends as that walk
 // leaves it, bit for bit. Returns how many vertices it took, a multiple of
