@@ -888,3 +888,62 @@ TEST(CompressorCentred, LongInputsStayWithinTolerance) {
         expectValidOutput(f, g);
     }
 }
+
+// Centred, a segment that closes before its balanced point takes the
+// vertices after that point again: from the caller's run, when the point is
+// in the run just taken, or from the compressor's own queue otherwise. Either
+// way the output is the one push() vertex by vertex gives, bit for bit,
+// whether the run is whole or split (so that a balanced point falls in an
+// earlier run), with counts or without.
+TEST(CompressorCentred, RunsAgreeWithPushPerVertex) {
+    std::mt19937_64 rng(61);
+    std::vector<VisibilityFunction> inputs;
+    for (int trial = 0; trial < 6; ++trial) {
+        inputs.push_back(dsm::test::randomMonotone(rng, 40 + trial * 70, 1, true));
+        inputs.push_back(randomSteps(rng, 30 + trial * 60, 1));
+        inputs.push_back(randomSteps(rng, 30 + trial * 60, 3));
+    }
+    inputs.push_back(smoothVolume(700, 6.0f));
+    inputs.push_back(plateauBetweenFalls());
+    std::size_t compared = 0;
+    for (const double eps : {0.005, 0.03, 0.0625, 0.2}) {
+        for (std::size_t k = 0; k < inputs.size(); ++k) {
+            const VisibilityFunction& f = inputs[k];
+            CompressorOptions o;
+            o.tolerance = eps;
+            o.centred = true;
+            const VisibilityFunction expected = compressWith(f, o, false);
+            for (const bool withCounts : {true, false}) {
+                o.channels = f.channels();
+                o.keepCounts = withCounts;
+                Compressor c(o);
+                std::vector<std::uint32_t> counts(f.size());
+                for (std::size_t i = 0; i < f.size(); ++i) counts[i] = f.count(i);
+                const std::uint32_t* runCounts = withCounts ? counts.data() : nullptr;
+                const std::size_t nc = static_cast<std::size_t>(f.channels());
+                for (const std::size_t parts : {1u, 2u, 5u}) {
+                    std::size_t begin = 0;
+                    for (std::size_t p = 1; p <= parts; ++p) {
+                        const std::size_t end = f.size() * p / parts;
+                        ASSERT_EQ(c.pushValid(f.depths().data() + begin, f.allValues().data() + begin * nc,
+                                              runCounts ? runCounts + begin : nullptr, end - begin),
+                                  end - begin);
+                        begin = end;
+                    }
+                    const VisibilityFunction got = c.finish();
+                    if (withCounts) {
+                        EXPECT_EQ(got, expected) << "eps " << eps << " input " << k << ", " << parts << " runs";
+                    } else {
+                        const auto asVector = [](auto span) { return std::vector(span.begin(), span.end()); };
+                        EXPECT_EQ(asVector(got.depths()), asVector(expected.depths()))
+                            << "eps " << eps << " input " << k << ", " << parts << " runs, no counts";
+                        EXPECT_EQ(asVector(got.allValues()), asVector(expected.allValues()))
+                            << "eps " << eps << " input " << k << ", " << parts << " runs, no counts";
+                    }
+                    ++compared;
+                }
+            }
+        }
+    }
+    EXPECT_EQ(compared, 4u * 20u * 2u * 3u);
+}

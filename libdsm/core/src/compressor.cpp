@@ -332,7 +332,8 @@ public:
         for (; i < n; ++i)
             if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
         std::size_t waiting = 0;  // the first of the run's vertices to wait in pending_
-        if (r.balancedAt != detail::kNotBalanced) {
+        const bool balancedHere = r.balancedAt != detail::kNotBalanced;
+        if (balancedHere) {
             const std::size_t b = r.balancedAt;
             const SlopeWindow w = SlopeWindow::ofSlopes(r.balancedLo, r.balancedHi, origin);
             const double inputV = static_cast<double>(v[b]);
@@ -340,7 +341,13 @@ public:
                          segmentCount_ + r.balancedCount);
             waiting = b + 1;
         }
-        noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
+        // The segment closes at vertex i, before its balanced point in this
+        // run: the caller takes the vertices after that point again from its
+        // own arrays (closeAtBalancedPoint()), instead of copies in pending_.
+        if (balancedHere && i < n && i > waiting && i - waiting <= kMostPending)
+            takeAgainFrom_ = waiting;
+        else
+            noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
         window_[0] = SlopeWindow::ofSlopes(r.lo, r.hi, origin);
         twiceIntegral_[0] = r.twiceIntegral;
         inputV_[0] = r.previousV;
@@ -421,7 +428,25 @@ public:
         open_ = false;
         balancedPoint_.valid = false;
         pending_.clear();
+        takeAgainFrom_ = 0;
         toReplay_.clear();
+    }
+
+    // Whether the last run extended stopped where the open segment closes,
+    // with the segment's balanced point in that run and the vertices after
+    // it left in the run rather than copied to pending_: the caller then
+    // calls closeAtBalancedPoint() before anything else.
+    bool closesBeforeRunEnd() const { return takeAgainFrom_ != 0; }
+
+    // Closes the open segment at its balanced point, in the run last
+    // extended, and returns the index in that run of the first vertex after
+    // it: the caller takes the vertices from there on again, in order (the
+    // vertex that stopped the run among them), as replay() would.
+    template <int C>
+    std::size_t closeAtBalancedPoint() {
+        const std::size_t from = takeAgainFrom_;
+        closeSegment<C>();
+        return from;
     }
 
 private:
@@ -676,10 +701,11 @@ private:
         }
         if (backtrack) toReplay_.pushFront<C>(pending_);
         pending_.clear();
+        takeAgainFrom_ = 0;
         return backtrack;
     }
 
-    bool backtracks() const { return balancedPoint_.valid && !pending_.empty(); }
+    bool backtracks() const { return balancedPoint_.valid && (!pending_.empty() || takeAgainFrom_ != 0); }
 
     // Takes the vertices handed back by closeSegment() again, in order, in a
     // loop rather than by recursion: a replay that closes a segment early
@@ -694,6 +720,10 @@ private:
                 const std::size_t runLength = toReplay_.sameBand(kReplayRun);
                 const std::size_t taken = extendRun<C>(toReplay_.depths(), toReplay_.values<C>(), toReplay_.counts(),
                                                        runLength, toReplay_.bands()[0]);
+                if (closesBeforeRunEnd()) {
+                    toReplay_.dropFront(closeAtBalancedPoint<C>());
+                    continue;
+                }
                 toReplay_.dropFront(taken);
                 if (taken == runLength) continue;
             }
@@ -741,6 +771,9 @@ private:
         double inputV[kMaxChannels] = {};
     } balancedPoint_;
     detail::VertexQueue pending_;
+    // Where pending_'s vertices start in the run last extended, when they
+    // were left there (closesBeforeRunEnd()); 0 otherwise.
+    std::size_t takeAgainFrom_ = 0;
     detail::VertexQueue toReplay_;  // vertices to take again, the next one first
 };
 
@@ -848,11 +881,16 @@ struct Compressor::Impl {
             // Layer ends are decided vertex by vertex.
             const bool plain = kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0;
             if (plain && !grey) {
+                const std::size_t runStart = i;
                 i += options.channels == 1
                          ? greedy.extendRun<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
                          : greedy.extendRun<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
                                                    greedy.window());
                 if (i == n) break;
+                if (greedy.closesBeforeRunEnd()) {  // one channel only (extendCentredRunBySlopes())
+                    i = runStart + greedy.closeAtBalancedPoint<1>();
+                    continue;
+                }
             } else if (plain && greyRuns()) {
                 i = pushGreyRun(z, v, counts, n, i, targets);
                 if (i == n) break;
