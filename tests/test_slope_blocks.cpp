@@ -133,7 +133,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
                          const char* name) {
     std::mt19937_64 rng(41);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
-    int ended = 0, whole = 0, balancedInBlocks = 0;
+    int ended = 0, endedPartWay = 0, whole = 0, balancedInBlocks = 0;
     for (int trial = 0; trial < 3000; ++trial) {
         const std::size_t n = rng() % 120;
         const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
@@ -162,7 +162,11 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
                                first.top, 1e-3, 2};
         for (bool withCounts : {false, true}) {
             const std::vector<CentredRun> walk = centredWalk(z, v, withCounts ? &counts : nullptr, frame, start);
-            const std::size_t taken = (walk.size() - 1) / 8 * 8;
+            // Whole blocks, and the vertices of the block where the segment
+            // ends before the one that ends it; a run's last few are left.
+            const std::size_t walked = walk.size() - 1, wholeBlocks = walked / 8 * 8;
+            const bool endsInBlock = walked < n && wholeBlocks + 8 <= n;
+            const std::size_t taken = endsInBlock ? walked : wholeBlocks;
             const CentredRun& expected = walk[taken];
             CentredRun got = start;
             const std::size_t took = blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, got);
@@ -181,14 +185,17 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
             EXPECT_EQ(got.balancedCount, expected.balancedCount) << what;
             if (::testing::Test::HasFailure()) return;
             if (withCounts) {
-                (taken + 8 <= n ? ended : whole) += 1;
+                (endsInBlock ? ended : whole) += 1;
+                if (endsInBlock && walked % 8 != 0) ++endedPartWay;
                 if (expected.balancedAt != start.balancedAt) ++balancedInBlocks;
             }
         }
     }
-    // Segments that end within the run, runs taken to their last whole
-    // block, and balanced vertices found in blocks, each many times.
+    // Segments that end within the run (part way through a block among
+    // them), runs taken to their last whole block, and balanced vertices
+    // found in blocks, each many times.
     EXPECT_GT(ended, 300) << name;
+    EXPECT_GT(endedPartWay, 300) << name;
     EXPECT_GT(whole, 300) << name;
     EXPECT_GT(balancedInBlocks, 300) << name;
 }

@@ -313,10 +313,12 @@ public:
     // extendRunBySlopes() takes them one by one), and whether the segment can
     // be balanced ending at each vertex worked out in slopes too, with the
     // vertex's 1 / dz instead of the divisions of balanced(): the same test
-    // (takeCentredVertex()). Whole blocks of eight go at once where they can
-    // (takeCentredBlocks(), the same arithmetic), the rest one by one. The run's last balanced
-    // vertex is kept by its index, and the vertices after it go to pending_
-    // together at the end: what notePoint() would leave, vertex by vertex.
+    // (takeCentredVertex()). Blocks of eight go at once where they can
+    // (takeCentredBlocks(), the same arithmetic), the run's last few vertices
+    // one by one. The run's last balanced vertex is kept by its index, and
+    // the vertices after it go to pending_ together at the end (what
+    // notePoint() would leave, vertex by vertex), or stay in the run for the
+    // caller to take again (closesBeforeRunEnd()).
     // Not inlined: extendOne() would otherwise carry all of it into the
     // greedy rule's vertex-by-vertex push().
     template <bool withCounts, typename T>

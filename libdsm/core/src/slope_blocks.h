@@ -174,16 +174,16 @@ static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::siz
     return true;
 }
 
-// Takes the leading whole blocks of eight vertices of a run that keep the
-// window feasible at their last vertex, as takeCentredVertex() would take
-// them one by one: the window narrowed by each vertex's bounds,
-// the integral and the counts (when counts is not null) summed in order,
-// and each vertex tested for balance; the run state ends as that walk
-// leaves it, bit for bit. Returns how many vertices it took, a multiple of
-// eight: the block where the segment ends and the run's last vertices are
-// left to the walk. Preconditions as takeSlopeBlocks()'s (depths never
-// fall, every depth difference from the origin in [kLeastFastDepth,
-// kMostFastDepth]).
+// Takes a run's vertices eight at a time, as takeCentredVertex() would take
+// them one by one: the window narrowed by each vertex's bounds, the
+// integral and the counts (when counts is not null) summed in order, and
+// each vertex tested for balance; the run state ends as that walk leaves
+// it, bit for bit. Whole blocks go while the window stays feasible at their
+// last vertex; of the block where the segment ends, the vertices before the
+// one that ends it. Returns how many vertices it took: the run's last
+// vertices short of a block are left to the walk. Preconditions as
+// takeSlopeBlocks()'s (depths never fall, every depth difference from the
+// origin in [kLeastFastDepth, kMostFastDepth]).
 DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const float* v, const std::uint32_t* counts,
                                                   std::size_t n, const CentredFrame& frame, CentredRun& run);
 DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const double* v, const std::uint32_t* counts,

@@ -206,8 +206,9 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
 // order. The window after each vertex is the least top and the greatest
 // bottom so far, exact in any order, so it is taken across the lanes; the
 // integral is summed lane after lane, as the walk sums it (a sum's rounding
-// depends on its order). A block is taken when the window after it is
-// feasible at its last vertex.
+// depends on its order). A block is taken whole when the window after it is
+// feasible at its last vertex; otherwise each lane's window is tested, and
+// the block is taken up to the first lane where it is not feasible.
 template <bool withCounts, typename T>
 std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
                             const CentredFrame& f, CentredRun& run) {
@@ -220,7 +221,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
     CentredRun r = run;  // a local: stores through `run` could alias the input as far as the compiler knows
     std::size_t i = 0;
     for (; i + 8 <= n; i += 8) {
-        Double4 depth[2], value[2], inverse[2], windowLo[2], windowHi[2], integral[2];
+        Double4 depth[2], value[2], inverse[2], depthBeyond[2], windowLo[2], windowHi[2], integral[2];
         double lo = r.lo, hi = r.hi, twiceIntegral = r.twiceIntegral, lastDz = 0.0;
         Double4 depthBefore = {r.previousZ, r.previousZ, r.previousZ, r.previousZ};
         Double4 valueBefore = {r.previousV, r.previousV, r.previousV, r.previousV};
@@ -230,6 +231,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             std::memcpy(&depths, z + i + 4 * h, sizeof depths);
             widen(depths, depth[h]);
             const Double4 dz = depth[h] - static_cast<double>(originZ);
+            depthBeyond[h] = dz;
             // fastInverse(), four lanes at once: the same operations.
             Double4 q;
             widen(1.0f / (depths - originZ), q);
@@ -258,8 +260,22 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             valueBefore = value[h];
         }
         // The window after the block is feasible at its last vertex, so at
-        // every vertex of it (feasibleWindow()).
-        if (!feasibleWindow(lo, hi, origin, lastDz)) break;
+        // every vertex of it (feasibleWindow()). Otherwise the segment ends
+        // within the block: its vertices before the first at which the window
+        // is not feasible are taken (it is never feasible again along a
+        // segment), and the rest are left.
+        unsigned lanesTaken = 8;
+        if (!feasibleWindow(lo, hi, origin, lastDz)) {
+            unsigned feasible = 0;
+#pragma GCC unroll 2
+            for (std::size_t h = 0; h < 2; ++h) {
+                const Double4 top = windowHi[h], bottom = windowLo[h];
+                feasible |= laneBits((bottom <= top) & (bottom <= zero) & (top * depthBeyond[h] >= -origin)) << (4 * h);
+            }
+            lanesTaken = static_cast<unsigned>(__builtin_ctz(~feasible));
+            if (lanesTaken == 0) break;
+        }
+        const std::size_t last = lanesTaken - 1;
         // balanced(), as the walk tests it: of the feasible slopes, one within
         // 2 margin / dz of the balanced slope whose end is within margin of
         // the input. Each select is std::min's or std::max's, its operands
@@ -283,6 +299,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             const Double4 highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
             balanced |= laneBits(lowest <= highest) << (4 * h);
         }
+        balanced &= (1u << lanesTaken) - 1u;
         // The block's last balanced vertex, taken by selects: whether a block
         // has one follows the input too closely for a branch to predict.
         const std::size_t k = 31 - static_cast<std::size_t>(__builtin_clz(balanced | 1u));
@@ -303,18 +320,22 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
                 std::memcpy(sums + 4 * h, &sum, sizeof sum);
             }
             countAfter = sums[k];
-            r.count = sums[7];
+            r.count = sums[last];
         }
         r.balancedAt = any ? i + k : r.balancedAt;
         r.balancedLo = any ? windowLo[k / 4][k % 4] : r.balancedLo;
         r.balancedHi = any ? windowHi[k / 4][k % 4] : r.balancedHi;
         r.balancedIntegral = any ? integral[k / 4][k % 4] : r.balancedIntegral;
         r.balancedCount = any ? countAfter : r.balancedCount;
-        r.lo = lo;
-        r.hi = hi;
-        r.twiceIntegral = twiceIntegral;
-        r.previousZ = depth[1][3];
-        r.previousV = value[1][3];
+        r.lo = windowLo[last / 4][last % 4];
+        r.hi = windowHi[last / 4][last % 4];
+        r.twiceIntegral = integral[last / 4][last % 4];
+        r.previousZ = depth[last / 4][last % 4];
+        r.previousV = value[last / 4][last % 4];
+        if (lanesTaken < 8) {
+            i += lanesTaken;
+            break;
+        }
     }
     run = r;
     return i;
