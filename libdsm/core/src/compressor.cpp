@@ -334,8 +334,7 @@ public:
         for (; i < n; ++i)
             if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
         std::size_t waiting = 0;  // the first of the run's vertices to wait in pending_
-        const bool balancedHere = r.balancedAt != detail::kNotBalanced;
-        if (balancedHere) {
+        if (r.balancedAt != detail::kNotBalanced) {
             const std::size_t b = r.balancedAt;
             const SlopeWindow w = SlopeWindow::ofSlopes(r.balancedLo, r.balancedHi, origin);
             const double inputV = static_cast<double>(v[b]);
@@ -343,10 +342,12 @@ public:
                          segmentCount_ + r.balancedCount);
             waiting = b + 1;
         }
-        // The segment closes at vertex i, before its balanced point in this
-        // run: the caller takes the vertices after that point again from its
-        // own arrays (closeAtBalancedPoint()), instead of copies in pending_.
-        if (balancedHere && i < n && i > waiting && i - waiting <= kMostPending)
+        // The segment closes at vertex i, after its balanced point, and no
+        // vertex after that point waits from an earlier run (the point is in
+        // this run, or just before it): the caller takes the vertices after
+        // it again from its own arrays (closeAtBalancedPoint()), instead of
+        // copies in pending_.
+        if (balancedPoint_.valid && pending_.empty() && i < n && i > waiting && i - waiting <= kMostPending)
             takeAgainFrom_ = waiting;
         else
             noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
@@ -430,7 +431,7 @@ public:
         open_ = false;
         balancedPoint_.valid = false;
         pending_.clear();
-        takeAgainFrom_ = 0;
+        takeAgainFrom_ = kNotTakenAgain;
         toReplay_.clear();
     }
 
@@ -438,7 +439,7 @@ public:
     // with the segment's balanced point in that run and the vertices after
     // it left in the run rather than copied to pending_: the caller then
     // calls closeAtBalancedPoint() before anything else.
-    bool closesBeforeRunEnd() const { return takeAgainFrom_ != 0; }
+    bool closesBeforeRunEnd() const { return takeAgainFrom_ != kNotTakenAgain; }
 
     // Closes the open segment at its balanced point, in the run last
     // extended, and returns the index in that run of the first vertex after
@@ -703,11 +704,11 @@ private:
         }
         if (backtrack) toReplay_.pushFront<C>(pending_);
         pending_.clear();
-        takeAgainFrom_ = 0;
+        takeAgainFrom_ = kNotTakenAgain;
         return backtrack;
     }
 
-    bool backtracks() const { return balancedPoint_.valid && (!pending_.empty() || takeAgainFrom_ != 0); }
+    bool backtracks() const { return balancedPoint_.valid && (!pending_.empty() || closesBeforeRunEnd()); }
 
     // Takes the vertices handed back by closeSegment() again, in order, in a
     // loop rather than by recursion: a replay that closes a segment early
@@ -774,8 +775,9 @@ private:
     } balancedPoint_;
     detail::VertexQueue pending_;
     // Where pending_'s vertices start in the run last extended, when they
-    // were left there (closesBeforeRunEnd()); 0 otherwise.
-    std::size_t takeAgainFrom_ = 0;
+    // were left there (closesBeforeRunEnd()).
+    static constexpr std::size_t kNotTakenAgain = ~std::size_t{0};
+    std::size_t takeAgainFrom_ = kNotTakenAgain;
     detail::VertexQueue toReplay_;  // vertices to take again, the next one first
 };
 
