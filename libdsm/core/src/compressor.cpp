@@ -147,6 +147,9 @@ public:
     // narrows its slope window by each vertex's target window and stops (and
     // leaves the window as it was) at the first vertex that would leave no
     // feasible slope. Returns how many it took (0 when no segment is open).
+    // Centred, the segment may instead close there at its balanced point, in
+    // this run: the count then ends at that point, and the vertices after it
+    // are the caller's to take again (see extendCentredRunBySlopes()).
     // The window the data defines (lines within band of the input) is kept;
     // the feasible slopes are those of it that also keep the output from
     // rising (slope <= 0) and from going below 0 at the segment's end
@@ -316,9 +319,13 @@ public:
     // (takeCentredVertex()). Blocks of eight go at once where they can
     // (takeCentredBlocks(), the same arithmetic), the run's last few vertices
     // one by one. The run's last balanced vertex is kept by its index, and
-    // the vertices after it go to pending_ together at the end (what
-    // notePoint() would leave, vertex by vertex), or stay in the run for the
-    // caller to take again (closesBeforeRunEnd()).
+    // the vertices after it go to pending_ together at the end: what
+    // notePoint() would leave, vertex by vertex. But when the segment closes
+    // within the run and none of its vertices waits from an earlier run (its
+    // balanced point is in this run, or just before it), it closes here, at
+    // that point, and the count returned ends there: the caller takes the
+    // vertices after it again from its own arrays, as replay() would take
+    // them from copies.
     // Not inlined: extendOne() would otherwise carry all of it into the
     // greedy rule's vertex-by-vertex push().
     template <bool withCounts, typename T>
@@ -342,15 +349,11 @@ public:
                          segmentCount_ + r.balancedCount);
             waiting = b + 1;
         }
-        // The segment closes at vertex i, after its balanced point, and no
-        // vertex after that point waits from an earlier run (the point is in
-        // this run, or just before it): the caller takes the vertices after
-        // it again from its own arrays (closeAtBalancedPoint()), instead of
-        // copies in pending_.
-        if (balancedPoint_.valid && pending_.empty() && i < n && i > waiting && i - waiting <= kMostPending)
-            takeAgainFrom_ = waiting;
-        else
-            noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
+        if (balancedPoint_.valid && pending_.empty() && i < n && i > waiting && i - waiting <= kMostPending) {
+            closeSegment<1>(true);
+            return waiting;
+        }
+        noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
         window_[0] = SlopeWindow::ofSlopes(r.lo, r.hi, origin);
         twiceIntegral_[0] = r.twiceIntegral;
         inputV_[0] = r.previousV;
@@ -376,10 +379,10 @@ public:
         if (!started_) return;
         while (open_) {  // a replay may open a segment again
             if (channels_ == 1) {
-                closeSegment<1>();
+                closeSegment<1>(backtracks());
                 replay<1>();
             } else {
-                closeSegment<3>();
+                closeSegment<3>(backtracks());
                 replay<3>();
             }
         }
@@ -431,30 +434,14 @@ public:
         open_ = false;
         balancedPoint_.valid = false;
         pending_.clear();
-        takeAgainFrom_ = kNotTakenAgain;
         toReplay_.clear();
     }
 
-    // Whether the last run extended stopped where the open segment closes,
-    // with the segment's balanced point in that run and the vertices after
-    // it left in the run rather than copied to pending_: the caller then
-    // calls closeAtBalancedPoint() before anything else.
-    bool closesBeforeRunEnd() const { return takeAgainFrom_ != kNotTakenAgain; }
-
-    // Closes the open segment at its balanced point, in the run last
-    // extended, and returns the index in that run of the first vertex after
-    // it: the caller takes the vertices from there on again, in order (the
-    // vertex that stopped the run among them), as replay() would.
-    template <int C>
-    std::size_t closeAtBalancedPoint() {
-        const std::size_t from = takeAgainFrom_;
-        closeSegment<C>();
-        return from;
-    }
-
 private:
+    // Inlined: push() per vertex is the path of Compressor::push(), and the
+    // compiler's own choice made it a call (7 % slower on a hair pixel).
     template <int C>
-    void pushOne(float z, const double* v, std::uint32_t count, double band) {
+    [[gnu::always_inline]] void pushOne(float z, const double* v, std::uint32_t count, double band) {
         if (!started_) {
             started_ = true;
             originZ_ = z;
@@ -473,7 +460,7 @@ private:
             // after it back to be taken again (replay()): this one goes after
             // them and before the rest, so it goes to the front first.
             if (backtracks()) toReplay_.pushFront<C>(z, v, count, band);
-            if (closeSegment<C>()) return;
+            if (closeSegment<C>(backtracks())) return;
         }
         if (z == originZ_) {
             absorbAtOrigin<C>(v, count, band);
@@ -644,9 +631,10 @@ private:
     // Emits the segment from the origin to the last accepted input vertex and
     // makes its end the new origin. Centred, a segment that cannot be
     // balanced there but could at an earlier vertex (its balanced point) ends
-    // at that vertex instead, and the vertices after it are taken again:
-    // returns true then. Otherwise this is Lokovic & Veach's greedy segment
-    // with their midpoint slope.
+    // at that vertex instead (`backtrack`: backtracks(), or true where the
+    // vertices after it stay with the caller), and the vertices after it in
+    // pending_ are handed to replay(): returns `backtrack`. Otherwise this is
+    // Lokovic & Veach's greedy segment with their midpoint slope.
     //
     // Why centred: the greedy rule extends a segment as far as some line stays
     // within the band, so a segment along a plateau (behind a semi-transparent
@@ -655,8 +643,7 @@ private:
     // Ending at the plateau's last balanced vertex keeps the plateau level and
     // gives the fall its own segment.
     template <int C>
-    bool closeSegment() {
-        const bool backtrack = backtracks();
+    bool closeSegment(bool backtrack) {
         if (backtrack) {
             const BalancedPoint& b = balancedPoint_;
             lastZ_ = b.z;
@@ -704,11 +691,10 @@ private:
         }
         if (backtrack) toReplay_.pushFront<C>(pending_);
         pending_.clear();
-        takeAgainFrom_ = kNotTakenAgain;
         return backtrack;
     }
 
-    bool backtracks() const { return balancedPoint_.valid && (!pending_.empty() || closesBeforeRunEnd()); }
+    bool backtracks() const { return balancedPoint_.valid && !pending_.empty(); }
 
     // Takes the vertices handed back by closeSegment() again, in order, in a
     // loop rather than by recursion: a replay that closes a segment early
@@ -723,10 +709,6 @@ private:
                 const std::size_t runLength = toReplay_.sameBand(kReplayRun);
                 const std::size_t taken = extendRun<C>(toReplay_.depths(), toReplay_.values<C>(), toReplay_.counts(),
                                                        runLength, toReplay_.bands()[0]);
-                if (closesBeforeRunEnd()) {
-                    toReplay_.dropFront(closeAtBalancedPoint<C>());
-                    continue;
-                }
                 toReplay_.dropFront(taken);
                 if (taken == runLength) continue;
             }
@@ -774,10 +756,6 @@ private:
         double inputV[kMaxChannels] = {};
     } balancedPoint_;
     detail::VertexQueue pending_;
-    // Where pending_'s vertices start in the run last extended, when they
-    // were left there (closesBeforeRunEnd()).
-    static constexpr std::size_t kNotTakenAgain = ~std::size_t{0};
-    std::size_t takeAgainFrom_ = kNotTakenAgain;
     detail::VertexQueue toReplay_;  // vertices to take again, the next one first
 };
 
@@ -885,16 +863,11 @@ struct Compressor::Impl {
             // Layer ends are decided vertex by vertex.
             const bool plain = kTrustValidInput && resetsLeft == 0 && !layerEnding && !layerClosed && layers > 0;
             if (plain && !grey) {
-                const std::size_t runStart = i;
                 i += options.channels == 1
                          ? greedy.extendRun<1>(z + i, v + i, counts ? counts + i : nullptr, n - i, greedy.window())
                          : greedy.extendRun<3>(z + i, v + i * nc, counts ? counts + i : nullptr, n - i,
                                                    greedy.window());
                 if (i == n) break;
-                if (greedy.closesBeforeRunEnd()) {  // one channel only (extendCentredRunBySlopes())
-                    i = runStart + greedy.closeAtBalancedPoint<1>();
-                    continue;
-                }
             } else if (plain && greyRuns()) {
                 i = pushGreyRun(z, v, counts, n, i, targets);
                 if (i == n) break;
