@@ -889,12 +889,12 @@ TEST(CompressorCentred, LongInputsStayWithinTolerance) {
     }
 }
 
-// Centred, a segment that closes before its balanced point takes the
-// vertices after that point again: from the caller's run, when the point is
-// in the run just taken, or from the compressor's own queue otherwise. Either
-// way the output is the one push() vertex by vertex gives, bit for bit,
-// whether the run is whole or split (so that a balanced point falls in an
-// earlier run), with counts or without.
+// Centred, a segment that closes at its balanced point, before its window
+// does, takes the vertices after that point again: from the caller's run,
+// when the point is in the run just taken (or just before it), or from the
+// compressor's own queue otherwise. Either way the output is the one push()
+// vertex by vertex gives, bit for bit, whether the run is whole or split (so
+// that a balanced point falls in an earlier run), with counts or without.
 TEST(CompressorCentred, RunsAgreeWithPushPerVertex) {
     std::mt19937_64 rng(61);
     std::vector<VisibilityFunction> inputs;
