@@ -340,7 +340,7 @@ public:
         if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
         for (; i < n; ++i)
             if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
-        std::size_t waiting = 0;  // the first of the run's vertices to wait in pending_
+        std::size_t waiting = 0;  // the first of the run's vertices after its balanced point
         if (r.balancedAt != detail::kNotBalanced) {
             const std::size_t b = r.balancedAt;
             const SlopeWindow w = SlopeWindow::ofSlopes(r.balancedLo, r.balancedHi, origin);
@@ -459,8 +459,9 @@ private:
             // A segment that closes at its balanced point hands the vertices
             // after it back to be taken again (replay()): this one goes after
             // them and before the rest, so it goes to the front first.
-            if (backtracks()) toReplay_.pushFront<C>(z, v, count, band);
-            if (closeSegment<C>(backtracks())) return;
+            const bool backtrack = backtracks();
+            if (backtrack) toReplay_.pushFront<C>(z, v, count, band);
+            if (closeSegment<C>(backtrack)) return;
         }
         if (z == originZ_) {
             absorbAtOrigin<C>(v, count, band);
