@@ -141,7 +141,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
         const double band = trial % 7 == 0 ? 1e-9 : 0.2 * unit(rng) + 1e-6;
         const CentredFrame frame{slopeFrame(originZ, originV, band), 0.1 * band};
         // A falling input in steps and ramps, flat for long stretches at
-        // times (plateaus, where segments balance).
+        // times (plateaus, where segments balance, and whose ends they keep).
         std::vector<float> z(n);
         std::vector<T> v(n);
         std::vector<std::uint32_t> counts(n);
@@ -149,6 +149,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
             if (rng() % 3 != 0) depth += 0.05 * unit(rng);
+            if (trial % 2 == 0 && rng() % 23 == 0) depth += 0.5 + unit(rng);  // a plateau
             if (rng() % 4 != 0) value = std::max(0.0, value - fall * unit(rng));
             z[i] = static_cast<float>(depth);
             v[i] = static_cast<T>(value);
@@ -158,8 +159,8 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
         // summed and balanced.
         const float firstZ = static_cast<float>(originZ + 1e-3);
         const VertexSlopes first = vertexSlopes(firstZ, originV, frame.slopes);
-        const CentredRun start{first.bottom, first.top, 2e-3 * originV, firstZ, originV, 7, 3, first.bottom,
-                               first.top, 1e-3, 2};
+        const CentredRun start{first.bottom, first.top, 2e-3 * originV, firstZ, originV, 7, 1e-3,
+                               1e-3, originV, 3, first.bottom, first.top, 1e-3, 2, 1e-3, 1e-3, originV};
         for (bool withCounts : {false, true}) {
             const std::vector<CentredRun> walk = centredWalk(z, v, withCounts ? &counts : nullptr, frame, start);
             // Whole blocks, and the vertices of the block where the segment
@@ -182,6 +183,13 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
             expectSameBits(got.balancedLo, expected.balancedLo, what + " balanced lo");
             expectSameBits(got.balancedHi, expected.balancedHi, what + " balanced hi");
             expectSameBits(got.balancedIntegral, expected.balancedIntegral, what + " balanced integral");
+            expectSameBits(got.longest, expected.longest, what + " longest stretch");
+            expectSameBits(got.longestEndDz, expected.longestEndDz, what + " longest stretch's end depth");
+            expectSameBits(got.longestEndV, expected.longestEndV, what + " longest stretch's end value");
+            expectSameBits(got.balancedLongest, expected.balancedLongest, what + " balanced longest stretch");
+            expectSameBits(got.balancedLongestEndDz, expected.balancedLongestEndDz,
+                           what + " balanced longest end depth");
+            expectSameBits(got.balancedLongestEndV, expected.balancedLongestEndV, what + " balanced longest end value");
             EXPECT_EQ(got.balancedCount, expected.balancedCount) << what;
             if (::testing::Test::HasFailure()) return;
             if (withCounts) {

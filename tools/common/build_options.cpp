@@ -70,7 +70,8 @@ void addBuildOptions(CLI::App& app, BuildOptionText& text) {
         ->capture_default_str();
     app.add_flag("--counts", options.counts, "Store per-vertex sample counts even without layers");
     app.add_flag("--centred-compression", options.centredCompression,
-                 "Centre compressed segments on their input (mean signed error within eps/10 on plateaus and ramps); "
+                 "Centre compressed segments on their input (mean signed error within eps/10 on plateaus and ramps, "
+                 "and within eps/10 where a plateau ends); "
                  "larger maps");
     app.add_option("--seed", options.seed, "Random seed, an integer in [0, 2^64 - 1]")
         ->check(integerIn(0, UINT64_MAX))

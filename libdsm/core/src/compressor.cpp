@@ -100,6 +100,14 @@ struct SlopeWindow {
     }
 };
 
+// A centred segment's longest stretch between input vertices so far (the
+// first of equals): its length, its end's depth beyond the origin, and the
+// input's values there (detail::CentredRun, detail::kPlateauShare).
+struct LongestStretch {
+    double length = 0.0, endDz = 0.0;
+    double endV[kMaxChannels] = {};
+};
+
 // The greedy segment builder of Lokovic & Veach §3.3 for one layer at a time,
 // writing straight into `out`. The segment origin is the last stored vertex
 // (exact float values), or a "virtual" origin at V = 1 while the layer has
@@ -191,6 +199,7 @@ public:
         // the trapezoids' halves are left out), and its last vertex.
         double twiceIntegral[C], previousV[C];
         double previousZ = lastZ_;
+        LongestStretch longest = longest_;
         if constexpr (Centred)
             forEachChannel<C>([&](int c) {
                 twiceIntegral[c] = twiceIntegral_[c];
@@ -246,15 +255,23 @@ public:
             if constexpr (Centred) {
                 const double step = static_cast<double>(z[i]) - previousZ;
                 previousZ = z[i];
+                const bool longer = step > longest.length;
+                if (longer) {
+                    longest.length = step;
+                    longest.endDz = dz;
+                }
                 forEachChannel<C>([&](int c) {
                     const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
                     twiceIntegral[c] += step * (previousV[c] + value);
                     previousV[c] = value;
+                    if (longer) longest.endV[c] = value;
                 });
                 const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
-                noteBalance<C>(w, twiceIntegral, previousV, z[i], &v[i * C], vertexCount, band, segmentCount_ + count);
+                noteBalance<C>(w, twiceIntegral, longest, previousV, z[i], &v[i * C], vertexCount, band,
+                               segmentCount_ + count);
             }
         }
+        if constexpr (Centred) longest_ = longest;
         forEachChannel<C>([&](int c) {
             window_[c] = w[c];
             if constexpr (Centred) {
@@ -335,7 +352,8 @@ public:
         const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
         const double origin = frame.slopes.originV;
         detail::CentredRun r{window_[0].lo(), window_[0].hi(), twiceIntegral_[0], lastZ_, inputV_[0], 0,
-                             detail::kNotBalanced, 0.0, 0.0, 0.0, 0};
+                             longest_.length, longest_.endDz, longest_.endV[0], detail::kNotBalanced, 0.0, 0.0, 0.0,
+                             0, 0.0, 0.0, 0.0};
         std::size_t i = 0;
         if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
         for (; i < n; ++i)
@@ -345,8 +363,12 @@ public:
             const std::size_t b = r.balancedAt;
             const SlopeWindow w = SlopeWindow::ofSlopes(r.balancedLo, r.balancedHi, origin);
             const double inputV = static_cast<double>(v[b]);
-            notePoint<1>(true, &w, &r.balancedIntegral, &inputV, z[b], &v[b], withCounts ? counts[b] : 0u, band,
-                         segmentCount_ + r.balancedCount);
+            LongestStretch longest;
+            longest.length = r.balancedLongest;
+            longest.endDz = r.balancedLongestEndDz;
+            longest.endV[0] = r.balancedLongestEndV;
+            notePoint<1>(true, &w, &r.balancedIntegral, longest, &inputV, z[b], &v[b], withCounts ? counts[b] : 0u,
+                         band, segmentCount_ + r.balancedCount);
             waiting = b + 1;
         }
         if (balancedPoint_.valid && pending_.empty() && i < n && i > waiting && i - waiting <= kMostPending) {
@@ -356,6 +378,9 @@ public:
         noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
         window_[0] = SlopeWindow::ofSlopes(r.lo, r.hi, origin);
         twiceIntegral_[0] = r.twiceIntegral;
+        longest_.length = r.longest;
+        longest_.endDz = r.longestEndDz;
+        longest_.endV[0] = r.longestEndV;
         inputV_[0] = r.previousV;
         segmentCount_ += r.count;
         if (i > 0) lastZ_ = z[i - 1];
@@ -413,6 +438,7 @@ public:
             originV_[c] = originV_[0];
             inputV_[c] = inputV_[0];
             twiceIntegral_[c] = twiceIntegral_[0];
+            longest_.endV[c] = longest_.endV[0];
             window_[c] = window_[0];
         }
         channels_ = 3;
@@ -470,7 +496,7 @@ private:
         open<C>(z, v, band);
         lastZ_ = z;
         segmentCount_ += count;
-        if (centred_) noteBalance<C>(window_, twiceIntegral_, inputV_, z, v, count, band, segmentCount_);
+        if (centred_) noteBalance<C>(window_, twiceIntegral_, longest_, inputV_, z, v, count, band, segmentCount_);
     }
 
     // Opens a segment from the origin to its first vertex beyond the origin's
@@ -487,7 +513,12 @@ private:
             if (centred_) {
                 twiceIntegral_[c] = dz * (inputV_[c] + v[c]);
                 inputV_[c] = v[c];
+                longest_.endV[c] = v[c];
             }
+        }
+        if (centred_) {
+            longest_.length = dz;  // the stretch from the origin
+            longest_.endDz = dz;
         }
         open_ = true;
         balancedPoint_.valid = false;
@@ -540,26 +571,42 @@ private:
         originStored_ = true;
     }
 
-    // Whether a segment from the origin to depth z with this window and
-    // input integral can be balanced: some feasible slope whose line's mean
-    // signed error against the input is within kBalance * band (a slope
-    // within 2 * kBalance * band / dz of the balanced one) and whose end is
-    // within as much of the input there (inputV).
+    // Whether a segment from the origin to depth z with this window, input
+    // integral and longest stretch can be balanced: some feasible slope whose
+    // line's mean signed error against the input is within kBalance * band (a
+    // slope within 2 * kBalance * band / dz of the balanced one), whose end
+    // is within as much of the input there (inputV), and which, when the
+    // longest stretch is a plateau, passes within as much of the input where
+    // that stretch ends (plateauEndSlopes()).
     template <int C>
-    bool balanced(const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z) const {
+    bool balanced(const SlopeWindow* w, const double* twiceIntegral, const LongestStretch& longest,
+                  const double* inputV, float z) const {
         const double dz = static_cast<double>(z) - originZ_;
         const double margin = kBalance * band_;
+        const bool plateau = longest.length >= detail::kPlateauShare * dz;
         bool ok = true;
         forEachChannel<C>([&](int c) {
             const double o = originV_[c];
             double lo, hi;
             w[c].feasibleSlopes(o, dz, lo, hi);
             const double balanced = balancedSlope(c, twiceIntegral[c], dz), spread = 2.0 * margin / dz;
-            const double lowest = std::max({lo, balanced - spread, (inputV[c] - margin - o) / dz});
-            const double highest = std::min({hi, balanced + spread, (inputV[c] + margin - o) / dz});
+            double lowest = std::max({lo, balanced - spread, (inputV[c] - margin - o) / dz});
+            double highest = std::min({hi, balanced + spread, (inputV[c] + margin - o) / dz});
+            if (plateau) plateauEndSlopes(c, longest, lowest, highest);
             ok &= lowest <= highest;
         });
         return ok;
+    }
+
+    // Narrows [lowest, highest] to the slopes whose line passes within
+    // kBalance * band of the input where the longest stretch ends: a receiver
+    // behind a plateau reads it there, and a segment that runs on into the
+    // next surface's fall can be balanced on average by tilting along the
+    // plateau, too dark at its end.
+    void plateauEndSlopes(int c, const LongestStretch& longest, double& lowest, double& highest) const {
+        const double margin = kBalance * band_, atEnd = longest.endV[c] - originV_[c];
+        lowest = std::max(lowest, (atEnd - margin) / longest.endDz);
+        highest = std::min(highest, (atEnd + margin) / longest.endDz);
     }
 
     // After a vertex joins the open segment: a segment that can be balanced
@@ -567,22 +614,25 @@ private:
     // in pending_, to be taken again from the balanced point should the
     // segment not be balanced when it closes.
     template <int C, typename T>
-    void noteBalance(const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z, const T* v,
-                     std::uint32_t count, double band, std::uint64_t segmentCount) {
-        notePoint<C>(balanced<C>(w, twiceIntegral, inputV, z), w, twiceIntegral, inputV, z, v, count, band,
-                     segmentCount);
+    void noteBalance(const SlopeWindow* w, const double* twiceIntegral, const LongestStretch& longest,
+                     const double* inputV, float z, const T* v, std::uint32_t count, double band,
+                     std::uint64_t segmentCount) {
+        notePoint<C>(balanced<C>(w, twiceIntegral, longest, inputV, z), w, twiceIntegral, longest, inputV, z, v,
+                     count, band, segmentCount);
     }
 
     // noteBalance() with the balance worked out (`w` is read only when
     // the segment is balanced).
     template <int C, typename T>
-    void notePoint(bool isBalanced, const SlopeWindow* w, const double* twiceIntegral, const double* inputV, float z,
-                   const T* v, std::uint32_t count, double band, std::uint64_t segmentCount) {
+    void notePoint(bool isBalanced, const SlopeWindow* w, const double* twiceIntegral, const LongestStretch& longest,
+                   const double* inputV, float z, const T* v, std::uint32_t count, double band,
+                   std::uint64_t segmentCount) {
         if (isBalanced) {
             BalancedPoint& b = balancedPoint_;
             b.valid = true;
             b.z = z;
             b.segmentCount = segmentCount;
+            b.longest = longest;
             forEachChannel<C>([&](int c) {
                 b.window[c] = w[c];
                 b.twiceIntegral[c] = twiceIntegral[c];
@@ -612,12 +662,14 @@ private:
     }
 
     // The centred end slope within [lo, hi]: of the slopes whose mean error
-    // is within kBalance * band, the one that ends nearest the input (so that
-    // the next segment starts on it); without such a slope, the feasible one
-    // nearest the balanced slope.
+    // is within kBalance * band (and whose line passes within as much of a
+    // plateau's end), the one that ends nearest the input (so that the next
+    // segment starts on it); without such a slope, the feasible one nearest
+    // the balanced slope.
     double centredSlope(int c, double lo, double hi, double dz) const {
         const double balanced = balancedSlope(c, twiceIntegral_[c], dz), spread = 2.0 * kBalance * band_ / dz;
-        const double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
+        double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
+        if (longest_.length >= detail::kPlateauShare * dz) plateauEndSlopes(c, longest_, lowest, highest);
         if (lowest > highest) return std::clamp(balanced, lo, hi);
         return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
     }
@@ -649,6 +701,7 @@ private:
             const BalancedPoint& b = balancedPoint_;
             lastZ_ = b.z;
             segmentCount_ = b.segmentCount;
+            longest_ = b.longest;
             for (int c = 0; c < C; ++c) {
                 window_[c] = b.window[c];
                 twiceIntegral_[c] = b.twiceIntegral[c];
@@ -745,6 +798,7 @@ private:
     std::uint64_t segmentCount_ = 0;
     double inputV_[kMaxChannels] = {1.0, 1.0, 1.0};  // the input's value at lastZ_
     double twiceIntegral_[kMaxChannels] = {};        // twice the input's integral from originZ_ to lastZ_
+    LongestStretch longest_;                         // of the open segment
 
     // The open segment's last vertex at which it could be closed balanced
     // (noteBalance()), and the vertices it took after that one.
@@ -752,6 +806,7 @@ private:
         bool valid = false;
         float z = 0.0f;
         std::uint64_t segmentCount = 0;
+        LongestStretch longest;
         SlopeWindow window[kMaxChannels] = {};
         double twiceIntegral[kMaxChannels] = {};
         double inputV[kMaxChannels] = {};

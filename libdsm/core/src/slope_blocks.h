@@ -106,19 +106,29 @@ DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const double* v,
 // A centred segment of one channel along a run (the compressor's
 // extendCentredRunBySlopes()): its window [lo, hi], twice the input's
 // integral from the origin (the trapezoids' halves left out), the last
-// vertex taken (depth and value), the counts taken, and the last vertex of
-// the run at which the segment can be balanced, with the window, integral
-// and counts there (balancedAt is kNotBalanced while there is none).
+// vertex taken (depth and value), the counts taken, the longest stretch
+// between input vertices so far (the first of equals: its length, and its
+// end's depth beyond the origin and value), and the last vertex of the run
+// at which the segment can be balanced, with the window, integral, counts
+// and longest stretch there (balancedAt is kNotBalanced while there is none).
 struct CentredRun {
     double lo, hi;
     double twiceIntegral;
     double previousZ, previousV;
     std::uint64_t count;
+    double longest, longestEndDz, longestEndV;
     std::size_t balancedAt;
     double balancedLo, balancedHi, balancedIntegral;
     std::uint64_t balancedCount;
+    double balancedLongest, balancedLongestEndDz, balancedLongestEndV;
 };
 inline constexpr std::size_t kNotBalanced = ~std::size_t{0};
+
+// A stretch between input vertices that makes up at least this share of a
+// segment's depth is a plateau (behind a semi-transparent surface), and a
+// receiver on the surface behind it reads the map where it ends: a centred
+// segment that takes one in ends within the margin of the input there.
+inline constexpr double kPlateauShare = 0.5;
 
 // What a centred segment tests at each vertex: the frame, and the margin by
 // which a balanced line may miss the input's mean and its last value.
@@ -132,8 +142,9 @@ struct CentredFrame {
 // its bounds stays feasible, and tests whether the segment can be balanced
 // ending there (balanced(): of the feasible slopes, one within 2 margin / dz
 // of the balanced slope (twiceIntegral - 2 origin dz) / dz^2 whose end is
-// within margin of the input). Returns false, the state untouched, when the
-// vertex leaves no feasible slope.
+// within margin of the input, and, when the longest stretch is a plateau,
+// within margin of the input at that stretch's end). Returns false, the
+// state untouched, when the vertex leaves no feasible slope.
 template <typename T>
 static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::size_t index, const CentredFrame& f,
                                      CentredRun& r) {
@@ -148,7 +159,13 @@ static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::siz
     r.lo = nextLo;
     r.count += count;
     const double value = static_cast<double>(v);
-    r.twiceIntegral += (static_cast<double>(z) - r.previousZ) * (r.previousV + value);
+    const double stretch = static_cast<double>(z) - r.previousZ;
+    r.twiceIntegral += stretch * (r.previousV + value);
+    if (stretch > r.longest) {
+        r.longest = stretch;
+        r.longestEndDz = dz;
+        r.longestEndV = value;
+    }
     r.previousZ = z;
     r.previousV = value;
     // Each select is std::min's or std::max's, its operands in that order.
@@ -164,12 +181,21 @@ static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::siz
     const double lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
     const double highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
     const double highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
-    if (lowest <= highest) {
+    // The line at the plateau's end, origin + slope longestEndDz, within
+    // margin of the input there: compared times longestEndDz (> 0).
+    const bool plateau = r.longest >= kPlateauShare * dz;
+    const double atPlateauEnd = r.longestEndV - origin;
+    const bool plateauEndKept = lowest * r.longestEndDz <= atPlateauEnd + margin &&
+                                highest * r.longestEndDz >= atPlateauEnd - margin;
+    if (lowest <= highest && (!plateau || plateauEndKept)) {
         r.balancedAt = index;
         r.balancedLo = r.lo;
         r.balancedHi = r.hi;
         r.balancedIntegral = r.twiceIntegral;
         r.balancedCount = r.count;
+        r.balancedLongest = r.longest;
+        r.balancedLongestEndDz = r.longestEndDz;
+        r.balancedLongestEndV = r.longestEndV;
     }
     return true;
 }

@@ -199,6 +199,32 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
     out = shiftedTwice > y ? shiftedTwice : y;
 }
 
+// The longest stretch of each lane and the lanes before it, and of `before`
+// (the run's, ahead of the lanes), the first of equals as the walk keeps it
+// (a later stretch replaces an earlier one only when it is longer): its
+// length, end depth beyond the origin and end value, through references.
+[[gnu::always_inline]] inline void longestSoFar(Double4& length, Double4& endDz, Double4& endV, double beforeLength,
+                                                double beforeEndDz, double beforeEndV) {
+    const Double4 none = {-__builtin_inf(), -__builtin_inf(), -__builtin_inf(), -__builtin_inf()}, zero = {};
+    // One lane back, then two lanes back: each lane keeps its own unless the
+    // one shifted in is at least as long (it lies earlier).
+    const Double4 length1 = __builtin_shufflevector(none, length, 0, 4, 5, 6);
+    const auto keep1 = length > length1;
+    length = keep1 ? length : length1;
+    endDz = keep1 ? endDz : __builtin_shufflevector(zero, endDz, 0, 4, 5, 6);
+    endV = keep1 ? endV : __builtin_shufflevector(zero, endV, 0, 4, 5, 6);
+    const Double4 length2 = __builtin_shufflevector(none, length, 0, 1, 4, 5);
+    const auto keep2 = length > length2;
+    length = keep2 ? length : length2;
+    endDz = keep2 ? endDz : __builtin_shufflevector(zero, endDz, 0, 1, 4, 5);
+    endV = keep2 ? endV : __builtin_shufflevector(zero, endV, 0, 1, 4, 5);
+    const Double4 runLength = {beforeLength, beforeLength, beforeLength, beforeLength};
+    const auto keep = length > runLength;
+    length = keep ? length : runLength;
+    endDz = keep ? endDz : Double4{beforeEndDz, beforeEndDz, beforeEndDz, beforeEndDz};
+    endV = keep ? endV : Double4{beforeEndV, beforeEndV, beforeEndV, beforeEndV};
+}
+
 // takeCentredBlocks(), a block of eight vertices at a time, in two halves of
 // four lanes. Each vertex's 1 / dz and bounds, the trapezoid it adds to the
 // integral and the balance test are worked out four lanes at once, by the
@@ -222,6 +248,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
     std::size_t i = 0;
     for (; i + 8 <= n; i += 8) {
         Double4 depth[2], value[2], inverse[2], depthBeyond[2], windowLo[2], windowHi[2], integral[2];
+        Double4 stretch[2];
         double lo = r.lo, hi = r.hi, twiceIntegral = r.twiceIntegral, lastDz = 0.0;
         Double4 depthBefore = {r.previousZ, r.previousZ, r.previousZ, r.previousZ};
         Double4 valueBefore = {r.previousV, r.previousV, r.previousV, r.previousV};
@@ -251,7 +278,8 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             // (z - previousZ) * (previousV + value), then summed in order.
             const Double4 previousDepth = __builtin_shufflevector(depthBefore, depth[h], 3, 4, 5, 6);
             const Double4 previousValue = __builtin_shufflevector(valueBefore, value[h], 3, 4, 5, 6);
-            const Double4 trapezoid = (depth[h] - previousDepth) * (previousValue + value[h]);
+            stretch[h] = depth[h] - previousDepth;
+            const Double4 trapezoid = stretch[h] * (previousValue + value[h]);
             const double sum0 = twiceIntegral + trapezoid[0], sum1 = sum0 + trapezoid[1];
             const double sum2 = sum1 + trapezoid[2], sum3 = sum2 + trapezoid[3];
             integral[h] = Double4{sum0, sum1, sum2, sum3};
@@ -278,9 +306,11 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
         const std::size_t last = lanesTaken - 1;
         // balanced(), as the walk tests it: of the feasible slopes, one within
         // 2 margin / dz of the balanced slope whose end is within margin of
-        // the input. Each select is std::min's or std::max's, its operands
-        // in the walk's order.
+        // the input and, behind a plateau, within margin of the input at the
+        // plateau's end. Each select is std::min's or std::max's, its
+        // operands in the walk's order.
         unsigned balanced = 0;
+        Double4 lowestOf[2], highestOf[2];
 #pragma GCC unroll 2
         for (std::size_t h = 0; h < 2; ++h) {
             const Double4 inv = inverse[h];
@@ -297,9 +327,49 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             const Double4 lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
             const Double4 highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
             const Double4 highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
+            lowestOf[h] = lowest;
+            highestOf[h] = highest;
             balanced |= laneBits(lowest <= highest) << (4 * h);
         }
         balanced &= (1u << lanesTaken) - 1u;
+        // The longest stretch so far at each vertex, and behind a plateau
+        // the line near the input where it ends. Where no stretch of the
+        // block is longer than the run's longest, and that one is shorter
+        // than kPlateauShare of the block's first depth beyond the origin (so
+        // of every later one), it stays the run's and no vertex is behind a
+        // plateau: the usual case along a long segment.
+        double longestAfter = r.longest, longestEndDzAfter = r.longestEndDz, longestEndVAfter = r.longestEndV;
+        double longestAtBalance = r.longest, longestEndDzAtBalance = r.longestEndDz;
+        double longestEndVAtBalance = r.longestEndV;
+        const Double4 longer = stretch[1] > stretch[0] ? stretch[1] : stretch[0];
+        if (greatestLane(longer) > r.longest || r.longest >= kPlateauShare * depthBeyond[0][0]) {
+            Double4 longest[2], longestEndDz[2], longestEndV[2];
+            unsigned kept = 0;
+#pragma GCC unroll 2
+            for (std::size_t h = 0; h < 2; ++h) {
+                longest[h] = stretch[h];
+                longestEndDz[h] = depthBeyond[h];
+                longestEndV[h] = value[h];
+                longestSoFar(longest[h], longestEndDz[h], longestEndV[h], longestAfter, longestEndDzAfter,
+                             longestEndVAfter);
+                longestAfter = longest[h][3];
+                longestEndDzAfter = longestEndDz[h][3];
+                longestEndVAfter = longestEndV[h][3];
+                const auto plateau = longest[h] >= kPlateauShare * depthBeyond[h];
+                const Double4 atPlateauEnd = longestEndV[h] - origin;
+                const auto plateauEndKept = (lowestOf[h] * longestEndDz[h] <= atPlateauEnd + margin) &
+                                            (highestOf[h] * longestEndDz[h] >= atPlateauEnd - margin);
+                kept |= laneBits(~plateau | plateauEndKept) << (4 * h);
+            }
+            balanced &= kept;
+            const std::size_t at = 31 - static_cast<std::size_t>(__builtin_clz(balanced | 1u));
+            longestAtBalance = longest[at / 4][at % 4];
+            longestEndDzAtBalance = longestEndDz[at / 4][at % 4];
+            longestEndVAtBalance = longestEndV[at / 4][at % 4];
+            longestAfter = longest[last / 4][last % 4];
+            longestEndDzAfter = longestEndDz[last / 4][last % 4];
+            longestEndVAfter = longestEndV[last / 4][last % 4];
+        }
         // The block's last balanced vertex, taken by selects: whether a block
         // has one follows the input too closely for a branch to predict.
         const std::size_t k = 31 - static_cast<std::size_t>(__builtin_clz(balanced | 1u));
@@ -327,9 +397,15 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
         r.balancedHi = any ? windowHi[k / 4][k % 4] : r.balancedHi;
         r.balancedIntegral = any ? integral[k / 4][k % 4] : r.balancedIntegral;
         r.balancedCount = any ? countAfter : r.balancedCount;
+        r.balancedLongest = any ? longestAtBalance : r.balancedLongest;
+        r.balancedLongestEndDz = any ? longestEndDzAtBalance : r.balancedLongestEndDz;
+        r.balancedLongestEndV = any ? longestEndVAtBalance : r.balancedLongestEndV;
         r.lo = windowLo[last / 4][last % 4];
         r.hi = windowHi[last / 4][last % 4];
         r.twiceIntegral = integral[last / 4][last % 4];
+        r.longest = longestAfter;
+        r.longestEndDz = longestEndDzAfter;
+        r.longestEndV = longestEndVAfter;
         r.previousZ = depth[last / 4][last % 4];
         r.previousV = value[last / 4][last % 4];
         if (lanesTaken < 8) {

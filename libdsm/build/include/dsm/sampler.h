@@ -57,8 +57,9 @@ struct BuildOptions {
     double levelToleranceFactor = 0.5;
     /// Centred compression (CompressorOptions::centred) at every level: plateaus
     /// behind semi-transparent surfaces and ramps keep a mean signed error
-    /// within a tenth of the tolerance, for larger maps (docs/dsm-build.md,
-    /// "Centred compression"). Off: Lokovic & Veach's greedy rule.
+    /// within a tenth of the tolerance, and so do plateaus where they end, for
+    /// larger maps (docs/dsm-build.md, "Centred compression"). Off: Lokovic &
+    /// Veach's greedy rule.
     bool centredCompression = false;
     std::uint32_t tileSize = 32;
     /// Layers per pixel (1 = plain deep shadow map; > 1 = MTSM with counts);

@@ -32,11 +32,14 @@ struct CompressorOptions {
     bool allowMonochrome = true;
     /// Centred segments: each segment's line is chosen, and where needed the
     /// segment ended early, so that its signed error against the input
-    /// averages to at most a tenth of the tolerance, and its end lies within
-    /// that of the input. Lokovic & Veach's greedy rule (false) lets a segment
-    /// along a plateau tilt into the fall that follows it, so plateaus behind
-    /// semi-transparent surfaces read too dark on average. Costs larger maps
-    /// (docs/dsm-build.md measures both); the L-infinity bound is the same.
+    /// averages to at most a tenth of the tolerance, its end lies within that
+    /// of the input, and so does its value where a plateau it takes in ends
+    /// (a stretch between input vertices of at least half the segment's
+    /// depth: a receiver behind a semi-transparent surface reads it there).
+    /// Lokovic & Veach's greedy rule (false) lets a segment along a plateau
+    /// tilt into the fall that follows it, so plateaus behind semi-transparent
+    /// surfaces read too dark. Costs larger maps (docs/dsm-build.md measures
+    /// both); the L-infinity bound is the same.
     bool centred = false;
 };
 
