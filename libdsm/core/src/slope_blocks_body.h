@@ -209,15 +209,19 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
     // One lane back, then two lanes back: each lane keeps its own unless the
     // one shifted in is at least as long (it lies earlier).
     const Double4 length1 = __builtin_shufflevector(none, length, 0, 4, 5, 6);
+    const Double4 endDz1 = __builtin_shufflevector(zero, endDz, 0, 4, 5, 6);
+    const Double4 endV1 = __builtin_shufflevector(zero, endV, 0, 4, 5, 6);
     const auto keep1 = length > length1;
     length = keep1 ? length : length1;
-    endDz = keep1 ? endDz : __builtin_shufflevector(zero, endDz, 0, 4, 5, 6);
-    endV = keep1 ? endV : __builtin_shufflevector(zero, endV, 0, 4, 5, 6);
+    endDz = keep1 ? endDz : endDz1;
+    endV = keep1 ? endV : endV1;
     const Double4 length2 = __builtin_shufflevector(none, length, 0, 1, 4, 5);
+    const Double4 endDz2 = __builtin_shufflevector(zero, endDz, 0, 1, 4, 5);
+    const Double4 endV2 = __builtin_shufflevector(zero, endV, 0, 1, 4, 5);
     const auto keep2 = length > length2;
     length = keep2 ? length : length2;
-    endDz = keep2 ? endDz : __builtin_shufflevector(zero, endDz, 0, 1, 4, 5);
-    endV = keep2 ? endV : __builtin_shufflevector(zero, endV, 0, 1, 4, 5);
+    endDz = keep2 ? endDz : endDz2;
+    endV = keep2 ? endV : endV2;
     const Double4 runLength = {beforeLength, beforeLength, beforeLength, beforeLength};
     const auto keep = length > runLength;
     length = keep ? length : runLength;
