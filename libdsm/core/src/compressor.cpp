@@ -583,7 +583,6 @@ private:
                   const double* inputV, float z) const {
         const double dz = static_cast<double>(z) - originZ_;
         const double margin = kBalance * band_;
-        const bool plateau = longest.length >= detail::kPlateauShare * dz;
         bool ok = true;
         forEachChannel<C>([&](int c) {
             const double o = originV_[c];
@@ -592,18 +591,20 @@ private:
             const double balanced = balancedSlope(c, twiceIntegral[c], dz), spread = 2.0 * margin / dz;
             double lowest = std::max({lo, balanced - spread, (inputV[c] - margin - o) / dz});
             double highest = std::min({hi, balanced + spread, (inputV[c] + margin - o) / dz});
-            if (plateau) plateauEndSlopes(c, longest, lowest, highest);
+            plateauEndSlopes(c, longest, dz, lowest, highest);
             ok &= lowest <= highest;
         });
         return ok;
     }
 
-    // Narrows [lowest, highest] to the slopes whose line passes within
-    // kBalance * band of the input where the longest stretch ends: a receiver
-    // behind a plateau reads it there, and a segment that runs on into the
-    // next surface's fall can be balanced on average by tilting along the
-    // plateau, too dark at its end.
-    void plateauEndSlopes(int c, const LongestStretch& longest, double& lowest, double& highest) const {
+    // When the longest stretch is a plateau of a segment to depth dz (at
+    // least detail::kPlateauShare of it), narrows [lowest, highest] to the
+    // slopes whose line passes within kBalance * band of the input where that
+    // stretch ends: a receiver behind a plateau reads it there, and a segment
+    // that runs on into the next surface's fall can be balanced on average by
+    // tilting along the plateau, too dark at its end.
+    void plateauEndSlopes(int c, const LongestStretch& longest, double dz, double& lowest, double& highest) const {
+        if (longest.length < detail::kPlateauShare * dz) return;
         const double margin = kBalance * band_, atEnd = longest.endV[c] - originV_[c];
         lowest = std::max(lowest, (atEnd - margin) / longest.endDz);
         highest = std::min(highest, (atEnd + margin) / longest.endDz);
@@ -669,7 +670,7 @@ private:
     double centredSlope(int c, double lo, double hi, double dz) const {
         const double balanced = balancedSlope(c, twiceIntegral_[c], dz), spread = 2.0 * kBalance * band_ / dz;
         double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
-        if (longest_.length >= detail::kPlateauShare * dz) plateauEndSlopes(c, longest_, lowest, highest);
+        plateauEndSlopes(c, longest_, dz, lowest, highest);
         if (lowest > highest) return std::clamp(balanced, lo, hi);
         return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
     }

@@ -199,34 +199,35 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
     out = shiftedTwice > y ? shiftedTwice : y;
 }
 
+// Each lane keeps its stretch (length, end depth beyond the origin, end
+// value) unless the earlier one given for it is at least as long: the first
+// of equals, as the walk keeps it.
+[[gnu::always_inline]] inline void keepLongest(Double4& length, Double4& endDz, Double4& endV,
+                                               const Double4& earlierLength, const Double4& earlierEndDz,
+                                               const Double4& earlierEndV) {
+    const auto keep = length > earlierLength;
+    length = keep ? length : earlierLength;
+    endDz = keep ? endDz : earlierEndDz;
+    endV = keep ? endV : earlierEndV;
+}
+
 // The longest stretch of each lane and the lanes before it, and of `before`
-// (the run's, ahead of the lanes), the first of equals as the walk keeps it
-// (a later stretch replaces an earlier one only when it is longer): its
-// length, end depth beyond the origin and end value, through references.
+// (the run's, ahead of the lanes), through references: one lane back, then
+// two lanes back, then the run's.
 [[gnu::always_inline]] inline void longestSoFar(Double4& length, Double4& endDz, Double4& endV, double beforeLength,
                                                 double beforeEndDz, double beforeEndV) {
     const Double4 none = {-__builtin_inf(), -__builtin_inf(), -__builtin_inf(), -__builtin_inf()}, zero = {};
-    // One lane back, then two lanes back: each lane keeps its own unless the
-    // one shifted in is at least as long (it lies earlier).
     const Double4 length1 = __builtin_shufflevector(none, length, 0, 4, 5, 6);
     const Double4 endDz1 = __builtin_shufflevector(zero, endDz, 0, 4, 5, 6);
     const Double4 endV1 = __builtin_shufflevector(zero, endV, 0, 4, 5, 6);
-    const auto keep1 = length > length1;
-    length = keep1 ? length : length1;
-    endDz = keep1 ? endDz : endDz1;
-    endV = keep1 ? endV : endV1;
+    keepLongest(length, endDz, endV, length1, endDz1, endV1);
     const Double4 length2 = __builtin_shufflevector(none, length, 0, 1, 4, 5);
     const Double4 endDz2 = __builtin_shufflevector(zero, endDz, 0, 1, 4, 5);
     const Double4 endV2 = __builtin_shufflevector(zero, endV, 0, 1, 4, 5);
-    const auto keep2 = length > length2;
-    length = keep2 ? length : length2;
-    endDz = keep2 ? endDz : endDz2;
-    endV = keep2 ? endV : endV2;
-    const Double4 runLength = {beforeLength, beforeLength, beforeLength, beforeLength};
-    const auto keep = length > runLength;
-    length = keep ? length : runLength;
-    endDz = keep ? endDz : Double4{beforeEndDz, beforeEndDz, beforeEndDz, beforeEndDz};
-    endV = keep ? endV : Double4{beforeEndV, beforeEndV, beforeEndV, beforeEndV};
+    keepLongest(length, endDz, endV, length2, endDz2, endV2);
+    keepLongest(length, endDz, endV, Double4{beforeLength, beforeLength, beforeLength, beforeLength},
+                Double4{beforeEndDz, beforeEndDz, beforeEndDz, beforeEndDz},
+                Double4{beforeEndV, beforeEndV, beforeEndV, beforeEndV});
 }
 
 // takeCentredBlocks(), a block of eight vertices at a time, in two halves of
