@@ -841,8 +841,11 @@ TEST(CompressorCentred, PlateauBehindASurfaceStaysLevel) {
 // fall is made as a pixel's filtered samples make it, many small steps,
 // smallest at its ends. A centred segment may not end inside that fall with
 // a line that tilts along the plateau and is balanced on average by the fall
-// (the value at the plateau's end would be too dark): the receiver reads the
-// plateau within the balance margin (and the values' rounding to float).
+// (the value at the plateau's end would be too dark), and of the lines that
+// pass within the balance margin of the plateau's end it takes the one that
+// passes nearest: here the receiver reads the plateau itself (to the values'
+// rounding to float). The line that ended nearest the input instead read it
+// up to the margin too dark; one balanced in mean alone, 0.2 eps.
 TEST(CompressorCentred, ReceiverReadsThePlateauWhereItsFallBegins) {
     for (const int steps : {24, 60, 150}) {
         VisibilityFunction f(1, true);
@@ -873,7 +876,7 @@ TEST(CompressorCentred, ReceiverReadsThePlateauWhereItsFallBegins) {
         for (const bool asRun : {false, true}) {
             const VisibilityFunction centred = compressWith(f, o, asRun);
             EXPECT_LE(maxError(f, centred), eps + kSlack);
-            EXPECT_LE(std::abs(centred.evaluate(beforeFall) - 0.6) / eps, 0.1 + 1e-5) << steps << " steps";
+            EXPECT_LE(std::abs(centred.evaluate(beforeFall) - 0.6) / eps, 1e-5) << steps << " steps";
             EXPECT_LE(std::abs(meanSignedError(f, centred, 1.0, 3.0) / eps), 0.1) << steps << " steps";
         }
     }

@@ -664,14 +664,18 @@ private:
 
     // The centred end slope within [lo, hi]: of the slopes whose mean error
     // is within kBalance * band (and whose line passes within as much of a
-    // plateau's end), the one that ends nearest the input (so that the next
-    // segment starts on it); without such a slope, the feasible one nearest
-    // the balanced slope.
+    // plateau's end), the one whose line passes nearest the input where the
+    // plateau ends, when the segment takes one in (a receiver behind it reads
+    // it there), otherwise the one that ends nearest the input (so that the
+    // next segment starts on it); without such a slope, the feasible one
+    // nearest the balanced slope.
     double centredSlope(int c, double lo, double hi, double dz) const {
         const double balanced = balancedSlope(c, twiceIntegral_[c], dz), spread = 2.0 * kBalance * band_ / dz;
         double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
         plateauEndSlopes(c, longest_, dz, lowest, highest);
         if (lowest > highest) return std::clamp(balanced, lo, hi);
+        if (longest_.length >= detail::kPlateauShare * dz)
+            return std::clamp((longest_.endV[c] - originV_[c]) / longest_.endDz, lowest, highest);
         return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
     }
 
