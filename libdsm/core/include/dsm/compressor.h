@@ -35,7 +35,8 @@ struct CompressorOptions {
     /// averages to at most a tenth of the tolerance, its end lies within that
     /// of the input, and so does its value where a plateau it takes in ends
     /// (a stretch between input vertices of at least half the segment's
-    /// depth: a receiver behind a semi-transparent surface reads it there).
+    /// depth: a receiver behind a semi-transparent surface reads it there;
+    /// of those lines it takes the one passing nearest the input there).
     /// Lokovic & Veach's greedy rule (false) lets a segment along a plateau
     /// tilt into the fall that follows it, so plateaus behind semi-transparent
     /// surfaces read too dark. Costs larger maps (docs/dsm-build.md measures
