@@ -597,14 +597,20 @@ private:
         return ok;
     }
 
-    // When the longest stretch is a plateau of a segment to depth dz (at
-    // least detail::kPlateauShare of it), narrows [lowest, highest] to the
-    // slopes whose line passes within kBalance * band of the input where that
-    // stretch ends: a receiver behind a plateau reads it there, and a segment
-    // that runs on into the next surface's fall can be balanced on average by
-    // tilting along the plateau, too dark at its end.
+    // Whether the longest stretch is a plateau of a segment to depth dz: at
+    // least detail::kPlateauShare of it.
+    static bool isPlateau(const LongestStretch& longest, double dz) {
+        return longest.length >= detail::kPlateauShare * dz;
+    }
+
+    // When the longest stretch is a plateau of a segment to depth dz,
+    // narrows [lowest, highest] to the slopes whose line passes within
+    // kBalance * band of the input where that stretch ends: a receiver behind
+    // a plateau reads it there, and a segment that runs on into the next
+    // surface's fall can be balanced on average by tilting along the plateau,
+    // too dark at its end.
     void plateauEndSlopes(int c, const LongestStretch& longest, double dz, double& lowest, double& highest) const {
-        if (longest.length < detail::kPlateauShare * dz) return;
+        if (!isPlateau(longest, dz)) return;
         const double margin = kBalance * band_, atEnd = longest.endV[c] - originV_[c];
         lowest = std::max(lowest, (atEnd - margin) / longest.endDz);
         highest = std::min(highest, (atEnd + margin) / longest.endDz);
@@ -674,7 +680,7 @@ private:
         double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
         plateauEndSlopes(c, longest_, dz, lowest, highest);
         if (lowest > highest) return std::clamp(balanced, lo, hi);
-        if (longest_.length >= detail::kPlateauShare * dz)
+        if (isPlateau(longest_, dz))
             return std::clamp((longest_.endV[c] - originV_[c]) / longest_.endDz, lowest, highest);
         return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
     }
