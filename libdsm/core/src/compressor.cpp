@@ -597,12 +597,6 @@ private:
         return ok;
     }
 
-    // Whether the longest stretch is a plateau of a segment to depth dz: at
-    // least detail::kPlateauShare of it.
-    static bool isPlateau(const LongestStretch& longest, double dz) {
-        return longest.length >= detail::kPlateauShare * dz;
-    }
-
     // When the longest stretch is a plateau of a segment to depth dz,
     // narrows [lowest, highest] to the slopes whose line passes within
     // kBalance * band of the input where that stretch ends: a receiver behind
@@ -610,7 +604,7 @@ private:
     // surface's fall can be balanced on average by tilting along the plateau,
     // too dark at its end.
     void plateauEndSlopes(int c, const LongestStretch& longest, double dz, double& lowest, double& highest) const {
-        if (!isPlateau(longest, dz)) return;
+        if (!detail::isPlateau(longest.length, dz)) return;
         const double margin = kBalance * band_, atEnd = longest.endV[c] - originV_[c];
         lowest = std::max(lowest, (atEnd - margin) / longest.endDz);
         highest = std::min(highest, (atEnd + margin) / longest.endDz);
@@ -680,7 +674,7 @@ private:
         double lowest = std::max(lo, balanced - spread), highest = std::min(hi, balanced + spread);
         plateauEndSlopes(c, longest_, dz, lowest, highest);
         if (lowest > highest) return std::clamp(balanced, lo, hi);
-        if (isPlateau(longest_, dz))
+        if (detail::isPlateau(longest_.length, dz))
             return std::clamp((longest_.endV[c] - originV_[c]) / longest_.endDz, lowest, highest);
         return std::clamp((inputV_[c] - originV_[c]) / dz, lowest, highest);
     }

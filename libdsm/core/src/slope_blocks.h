@@ -130,6 +130,9 @@ inline constexpr std::size_t kNotBalanced = ~std::size_t{0};
 // segment that takes one in ends within the margin of the input there.
 inline constexpr double kPlateauShare = 0.5;
 
+// Whether a longest stretch of this length is a plateau of a segment dz deep.
+static inline bool isPlateau(double longest, double dz) { return longest >= kPlateauShare * dz; }
+
 // What a centred segment tests at each vertex: the frame, and the margin by
 // which a balanced line may miss the input's mean and its last value.
 struct CentredFrame {
@@ -183,7 +186,7 @@ static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::siz
     const double highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
     // The line at the plateau's end, origin + slope longestEndDz, within
     // margin of the input there: compared times longestEndDz (> 0).
-    const bool plateau = r.longest >= kPlateauShare * dz;
+    const bool plateau = isPlateau(r.longest, dz);
     const double atPlateauEnd = r.longestEndV - origin;
     const bool plateauEndKept = lowest * r.longestEndDz <= atPlateauEnd + margin &&
                                 highest * r.longestEndDz >= atPlateauEnd - margin;

@@ -347,7 +347,7 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
         double longestAtBalance = r.longest, longestEndDzAtBalance = r.longestEndDz;
         double longestEndVAtBalance = r.longestEndV;
         const Double4 longer = stretch[1] > stretch[0] ? stretch[1] : stretch[0];
-        if (greatestLane(longer) > r.longest || r.longest >= kPlateauShare * depthBeyond[0][0]) {
+        if (greatestLane(longer) > r.longest || isPlateau(r.longest, depthBeyond[0][0])) {
             Double4 longest[2], longestEndDz[2], longestEndV[2];
             unsigned kept = 0;
 #pragma GCC unroll 2
