@@ -357,11 +357,13 @@ TEST(Compressor, GreyRgbRunsAgreeWithPushPerVertex) {
     // RGB whose channels stay within the tolerance of each other (the grey
     // path: their mid-range, its band narrowed by their spread), then turn
     // coloured part way (the builder widens to RGB): a run gives what push()
-    // vertex by vertex gives, whole or split, float or double values.
+    // vertex by vertex gives, whole or split, float or double values; greedy
+    // or centred (whose runs may close a segment early within the run).
     std::mt19937_64 rng(58);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     int widened = 0, stayedGrey = 0;
-    for (int trial = 0; trial < 60; ++trial) {
+    for (int trial = 0; trial < 120; ++trial) {
+        const bool centred = trial >= 60;
         const double eps = trial % 3 == 0 ? 0.01 : 0.05;
         VisibilityFunction f(3, true);
         float z = 1.0f, v = 1.0f;
@@ -381,6 +383,7 @@ TEST(Compressor, GreyRgbRunsAgreeWithPushPerVertex) {
         options.tolerance = eps;
         options.channels = 3;
         options.keepCounts = true;
+        options.centred = centred;
         Compressor c(options);
         for (std::size_t i = 0; i < f.size(); ++i) ASSERT_TRUE(c.push(f.z(i), f.values(i), f.count(i)));
         const VisibilityFunction expected = c.finish();
@@ -397,9 +400,18 @@ TEST(Compressor, GreyRgbRunsAgreeWithPushPerVertex) {
                               f.size() - split),
                   f.size() - split);
         EXPECT_EQ(c.finish(), expected) << "trial " << trial << ", split " << split;
+
+        // Short runs: vertices past a balanced point wait from run to run.
+        for (std::size_t i = 0; i < f.size();) {
+            const std::size_t length = std::min<std::size_t>(1 + rng() % 24, f.size() - i);
+            ASSERT_EQ(c.pushValid(f.depths().data() + i, values.data() + 3 * i, f.counts().data() + i, length),
+                      length);
+            i += length;
+        }
+        EXPECT_EQ(c.finish(), expected) << "trial " << trial << ", short runs";
     }
-    EXPECT_GT(widened, 10);
-    EXPECT_GT(stayedGrey, 10);
+    EXPECT_GT(widened, 20);
+    EXPECT_GT(stayedGrey, 20);
 }
 
 TEST(Compressor, PushValidRunStopsWhereALayerEnds) {

@@ -347,7 +347,8 @@ public:
     // greedy rule's vertex-by-vertex push().
     template <bool withCounts, typename T>
     [[gnu::noinline]] std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts,
-                                                           std::size_t n, double band) {
+                                                           std::size_t n, double band,
+                                                           const double* bands = nullptr) {
         if (n == 0) return 0;
         const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
         const double origin = frame.slopes.originV;
@@ -355,9 +356,17 @@ public:
                              longest_.length, longest_.endDz, longest_.endV[0], detail::kNotBalanced, 0.0, 0.0, 0.0,
                              0, 0.0, 0.0, 0.0};
         std::size_t i = 0;
-        if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
-        for (; i < n; ++i)
-            if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
+        if (bands) {
+            // The margin stays the run's: balanced() measures it from band_ too.
+            for (; i < n; ++i) {
+                const detail::CentredFrame own{detail::withBand(frame.slopes, bands[i]), frame.margin};
+                if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, own, r)) break;
+            }
+        } else {
+            if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
+            for (; i < n; ++i)
+                if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
+        }
         std::size_t waiting = 0;  // the first of the run's vertices after its balanced point
         if (r.balancedAt != detail::kNotBalanced) {
             const std::size_t b = r.balancedAt;
@@ -375,7 +384,8 @@ public:
             closeSegment<1>(true);
             return waiting;
         }
-        noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band);
+        noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band,
+                          bands ? bands + waiting : nullptr);
         window_[0] = SlopeWindow::ofSlopes(r.lo, r.hi, origin);
         twiceIntegral_[0] = r.twiceIntegral;
         longest_.length = r.longest;
@@ -389,11 +399,15 @@ public:
 
     // extendRun() of one channel whose vertices have bands of their own (grey
     // RGB input: the channels' mid-range, its band narrowed by their spread),
-    // each > 0; not centred.
+    // each > 0. Centred, the segment may close early within the run, as in
+    // extendCentredRunBySlopes(), whose walk then takes them one by one.
     std::size_t extendGreyRun(const float* z, const double* mids, const double* bands, const std::uint32_t* counts,
                               std::size_t n) {
         if (!open_) return 0;
         // The run's own band (band_) is not read where each vertex has one.
+        if (centred_)
+            return counts ? extendCentredRunBySlopes<true>(z, mids, counts, n, band_, bands)
+                          : extendCentredRunBySlopes<false>(z, mids, counts, n, band_, bands);
         return counts ? extendRunBySlopes<true>(z, mids, counts, n, band_, bands)
                       : extendRunBySlopes<false>(z, mids, counts, n, band_, bands);
     }
@@ -646,10 +660,12 @@ private:
     }
 
     // notePoint() of n vertices in a row at none of which the segment is
-    // balanced (counts null for counts of 0): each waits in pending_ while
-    // the segment has a balanced point.
+    // balanced (counts null for counts of 0; each of band bands[i], or all
+    // of `band` when bands is null): each waits in pending_ while the
+    // segment has a balanced point.
     template <int C, typename T>
-    void noteUnbalanced(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+    void noteUnbalanced(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band,
+                        const double* bands = nullptr) {
         if (!balancedPoint_.valid || n == 0) return;
         if (pending_.size() + n > kMostPending) {
             // Too far past it: the segment closes where its window does, so
@@ -659,7 +675,7 @@ private:
             pending_.clear();
             return;
         }
-        pending_.pushBack<C>(z, v, counts, n, band);
+        pending_.pushBack<C>(z, v, counts, n, band, bands);
     }
 
     // The centred end slope within [lo, hi]: of the slopes whose mean error
@@ -950,9 +966,9 @@ struct Compressor::Impl {
         return i;
     }
 
-    // Whether grey input goes through pushGreyRun(): not centred, and with a
-    // band > 0 for every grey vertex (a tolerance above 2^-24; see greyTarget()).
-    bool greyRuns() const { return grey && !options.centred && greedy.window() > 0.0; }
+    // Whether grey input goes through pushGreyRun(): with a band > 0 for
+    // every grey vertex (a tolerance above 2^-24; see greyTarget()).
+    bool greyRuns() const { return grey && greedy.window() > 0.0; }
 
     // The channels' mid-range and its band for grey input; false when the
     // channels are too far apart to stand for one (the builder then widens
@@ -976,8 +992,9 @@ struct Compressor::Impl {
     // The grey vertices of a run from i on that extend the open segment,
     // taken as a run of their mid-ranges, each with its band: what pushGrey()
     // would do vertex by vertex. Returns the index of the first vertex it did
-    // not take: one that ends the segment or whose channels disagree (push()
-    // takes those). Targets are worked out a chunk ahead and kept in
+    // not take: one that ends the segment (centred: or the first after the
+    // balanced point at which the segment closed) or whose channels disagree
+    // (push() takes those). Targets are worked out a chunk ahead and kept in
     // `targets`, so that the next segment's vertices reuse them.
     template <typename T>
     std::size_t pushGreyRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, std::size_t i,

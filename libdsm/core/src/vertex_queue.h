@@ -44,13 +44,15 @@ public:
 
     void dropFront(std::size_t n) { head_ += n; }
 
-    // Puts n vertices (values C each; counts null for counts of 0), all of
-    // one band, after the others.
+    // Puts n vertices (values C each; counts null for counts of 0) after the
+    // others, each of band bands[i], or all of `band` when bands is null.
     template <int C, typename T>
-    void pushBack(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
+    void pushBack(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band,
+                  const double* bands = nullptr) {
         while (z_.size() - end_ < n) grow(C, 0);
         for (std::size_t i = 0; i < n; ++i)
-            put<C>(end_ + i, z[i], v + i * static_cast<std::size_t>(C), counts ? counts[i] : 0u, band);
+            put<C>(end_ + i, z[i], v + i * static_cast<std::size_t>(C), counts ? counts[i] : 0u,
+                   bands ? bands[i] : band);
         end_ += n;
     }
 
