@@ -176,16 +176,20 @@ public:
         return counts ? extendRun<C, true, false>(z, v, counts, n, band) : extendRun<C, false, false>(z, v, counts, n, band);
     }
 
-    // A vertex that moves bounds updates them by branches for one channel (on
-    // smooth input nearly every vertex moves the same bound, and a select
-    // would chain each vertex's comparison to the previous one's result) and
-    // by selects for RGB (six bounds make too many branches to predict).
+    // With a band > 0 the window is kept as slopes (below); a band of 0 keeps
+    // the exact cross products here. A vertex that moves bounds updates them
+    // by branches for one channel (on smooth input nearly every vertex moves
+    // the same bound, and a select would chain each vertex's comparison to
+    // the previous one's result) and by selects for RGB (six bounds make too
+    // many branches to predict).
     template <int C, bool withCounts, bool Centred, typename T>
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if constexpr (C == 1 && !Centred)
             if (band > 0.0) return extendRunBySlopes<withCounts>(z, v, counts, n, band);
         if constexpr (C == 1 && Centred)
             if (band > 0.0) return extendCentredRunBySlopes<withCounts>(z, v, counts, n, band);
+        if constexpr (C == 3)
+            if (band > 0.0) return extendRgbRunBySlopes<withCounts, Centred>(z, v, counts, n, band);
         SlopeWindow w[C];
         Double2 origin[C];
         forEachChannel<C>([&](int c) {
@@ -393,6 +397,88 @@ public:
         longest_.endV[0] = r.longestEndV;
         inputV_[0] = r.previousV;
         segmentCount_ += r.count;
+        if (i > 0) lastZ_ = z[i - 1];
+        return i;
+    }
+
+    // extendRun() for RGB with a band > 0: each channel's window as two
+    // slopes and each vertex's bounds as vertexSlopes() makes them, with one
+    // 1 / dz for the three channels; the segment takes a vertex while every
+    // channel's window stays feasible. Centred, a vertex at which every
+    // channel can be balanced (balancedInSlopes(), the test of balanced()
+    // without its divisions) becomes the balanced point, as noteBalance()
+    // would make it; the others wait in pending_.
+    template <bool withCounts, bool Centred, typename T>
+    std::size_t extendRgbRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                                     double band) {
+        constexpr int C = 3;
+        detail::SlopeFrame frame[C];
+        double lo[C], hi[C], twiceIntegral[C], previousV[C];
+        forEachChannel<C>([&](int c) {
+            frame[c] = detail::slopeFrame(originZ_, originV_[c], band);
+            lo[c] = window_[c].lo();
+            hi[c] = window_[c].hi();
+            if constexpr (Centred) {
+                twiceIntegral[c] = twiceIntegral_[c];
+                previousV[c] = inputV_[c];
+            }
+        });
+        const double margin = kBalance * band_;
+        double previousZ = lastZ_;
+        LongestStretch longest = longest_;
+        std::uint64_t count = 0;
+        std::size_t i = 0;
+        for (; i < n; ++i) {
+            const T* values = v + i * C;
+            const double dz = static_cast<double>(z[i]) - originZ_;
+            const double inverse = detail::depthInverse(z[i], originZ_, dz);
+            double nextLo[C], nextHi[C];
+            bool feasible = true;
+            forEachChannel<C>([&](int c) {
+                const detail::VertexSlopes s = detail::slopesScaledBy(inverse, dz, values[c], frame[c]);
+                nextHi[c] = std::min(hi[c], s.top);
+                nextLo[c] = std::max(lo[c], s.bottom);
+                feasible &= detail::feasibleWindow(nextLo[c], nextHi[c], frame[c].originV, dz);
+            });
+            if (!feasible) break;
+            std::copy(nextLo, nextLo + C, lo);
+            std::copy(nextHi, nextHi + C, hi);
+            const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
+            count += vertexCount;
+            if constexpr (Centred) {
+                const double step = static_cast<double>(z[i]) - previousZ;
+                previousZ = z[i];
+                const bool longer = step > longest.length;
+                if (longer) {
+                    longest.length = step;
+                    longest.endDz = dz;
+                }
+                const bool plateau = detail::isPlateau(longest.length, dz);
+                bool isBalanced = true;
+                forEachChannel<C>([&](int c) {
+                    const double value = static_cast<double>(values[c]);
+                    twiceIntegral[c] += step * (previousV[c] + value);
+                    previousV[c] = value;
+                    if (longer) longest.endV[c] = value;
+                    isBalanced &= detail::balancedInSlopes(lo[c], hi[c], twiceIntegral[c], value, inverse, plateau,
+                                                           longest.endDz, longest.endV[c], frame[c].originV, margin);
+                });
+                SlopeWindow w[C];
+                if (isBalanced)
+                    forEachChannel<C>([&](int c) { w[c] = SlopeWindow::ofSlopes(lo[c], hi[c], frame[c].originV); });
+                notePoint<C>(isBalanced, w, twiceIntegral, longest, previousV, z[i], values, vertexCount, band,
+                             segmentCount_ + count);
+            }
+        }
+        forEachChannel<C>([&](int c) {
+            window_[c] = SlopeWindow::ofSlopes(lo[c], hi[c], frame[c].originV);
+            if constexpr (Centred) {
+                twiceIntegral_[c] = twiceIntegral[c];
+                inputV_[c] = previousV[c];
+            }
+        });
+        if constexpr (Centred) longest_ = longest;
+        segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
     }

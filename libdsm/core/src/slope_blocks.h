@@ -140,6 +140,37 @@ struct CentredFrame {
     double margin;
 };
 
+// Whether a centred segment of one channel can be balanced ending at its
+// last vertex (value, 1 / dz beyond the origin given): of the feasible
+// slopes in its window [lo, hi], one within 2 margin / dz of the balanced
+// slope (twiceIntegral - 2 origin dz) / dz^2 whose end is within margin of
+// the value, and, behind a plateau (the longest stretch, ending
+// longestEndDz beyond the origin at longestEndV), within margin of the
+// input where the plateau ends: the compressor's balanced(), in slopes.
+[[gnu::always_inline]] static inline bool balancedInSlopes(double lo, double hi, double twiceIntegral, double value,
+                                                          double inverse, bool plateau, double longestEndDz,
+                                                          double longestEndV, double origin, double margin) {
+    // Each select is std::min's or std::max's, its operands in that order.
+    const double feasibleHi = 0.0 < hi ? 0.0 : hi;
+    const double aboveZero = -origin * inverse;
+    const double raised = lo < aboveZero ? aboveZero : lo;
+    const double feasibleLo = feasibleHi < raised ? feasibleHi : raised;
+    const double balancedSlope = (twiceIntegral * inverse - 2.0 * origin) * inverse;
+    const double spread = 2.0 * margin * inverse;
+    const double belowBalance = balancedSlope - spread, aboveBalance = balancedSlope + spread;
+    const double endLow = (value - margin - origin) * inverse, endHigh = (value + margin - origin) * inverse;
+    const double lowestOfTwo = feasibleLo < belowBalance ? belowBalance : feasibleLo;
+    const double lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
+    const double highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
+    const double highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
+    // The line at the plateau's end, origin + slope longestEndDz, within
+    // margin of the input there: compared times longestEndDz (> 0).
+    const double atPlateauEnd = longestEndV - origin;
+    const bool plateauEndKept =
+        lowest * longestEndDz <= atPlateauEnd + margin && highest * longestEndDz >= atPlateauEnd - margin;
+    return lowest <= highest && (!plateau || plateauEndKept);
+}
+
 // One step of the compressor's centred walk: takes vertex `index` of a run
 // (depth z, value v, count) into the run state when the window narrowed by
 // its bounds stays feasible, and tests whether the segment can be balanced
@@ -171,26 +202,8 @@ static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::siz
     }
     r.previousZ = z;
     r.previousV = value;
-    // Each select is std::min's or std::max's, its operands in that order.
-    const double feasibleHi = 0.0 < r.hi ? 0.0 : r.hi;
-    const double aboveZero = -origin * inverse;
-    const double raised = r.lo < aboveZero ? aboveZero : r.lo;
-    const double feasibleLo = feasibleHi < raised ? feasibleHi : raised;
-    const double balancedSlope = (r.twiceIntegral * inverse - 2.0 * origin) * inverse;
-    const double spread = 2.0 * margin * inverse;
-    const double belowBalance = balancedSlope - spread, aboveBalance = balancedSlope + spread;
-    const double endLow = (value - margin - origin) * inverse, endHigh = (value + margin - origin) * inverse;
-    const double lowestOfTwo = feasibleLo < belowBalance ? belowBalance : feasibleLo;
-    const double lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
-    const double highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
-    const double highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
-    // The line at the plateau's end, origin + slope longestEndDz, within
-    // margin of the input there: compared times longestEndDz (> 0).
-    const bool plateau = isPlateau(r.longest, dz);
-    const double atPlateauEnd = r.longestEndV - origin;
-    const bool plateauEndKept = lowest * r.longestEndDz <= atPlateauEnd + margin &&
-                                highest * r.longestEndDz >= atPlateauEnd - margin;
-    if (lowest <= highest && (!plateau || plateauEndKept)) {
+    if (balancedInSlopes(r.lo, r.hi, r.twiceIntegral, value, inverse, isPlateau(r.longest, dz), r.longestEndDz,
+                         r.longestEndV, origin, margin)) {
         r.balancedAt = index;
         r.balancedLo = r.lo;
         r.balancedHi = r.hi;
