@@ -3,7 +3,7 @@
 // that taking the vertices one by one with vertexSlopes() gives up to the
 // last whole block before the segment ends, bit for bit, on the baseline
 // instruction set and on AVX2 (where the processor has it), with one band
-// for the run and with a band for each vertex.
+// for the run and with a band for each vertex, for one channel and for RGB.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -106,6 +106,114 @@ TEST(SlopeBlocks, Avx2BlocksTakeWhatVertexByVertexWould) {
     if (!avx2.floats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
     checkVariant(avx2.floats, "AVX2, float values");
     checkVariant(avx2.doubles, "AVX2, double values");
+}
+
+// RGB vertex by vertex, as the compressor's RGB walk takes them: one 1 / dz
+// a vertex, each channel's window narrowed by its bounds, and the vertex
+// taken while every channel's window stays feasible; then cut back to the
+// last whole block of eight.
+struct RgbWalk {
+    std::size_t taken;
+    double lo[3], hi[3];
+    std::uint64_t count;
+};
+
+template <typename T>
+RgbWalk rgbWalkInBlocks(const std::vector<float>& z, const std::vector<T>& v,
+                        const std::vector<std::uint32_t>& counts, const SlopeFrame* frames, RgbWalk w) {
+    std::vector<RgbWalk> after{w};
+    for (std::size_t i = 0; i < z.size(); ++i) {
+        const double dz = static_cast<double>(z[i]) - static_cast<double>(frames[0].originZ);
+        const double inverse = depthInverse(z[i], frames[0].originZ, dz);
+        RgbWalk next = w;
+        bool feasible = true;
+        for (int c = 0; c < 3; ++c) {
+            const VertexSlopes s = slopesScaledBy(inverse, dz, v[3 * i + static_cast<std::size_t>(c)], frames[c]);
+            next.hi[c] = std::min(w.hi[c], s.top);
+            next.lo[c] = std::max(w.lo[c], s.bottom);
+            feasible &= feasibleWindow(next.lo[c], next.hi[c], frames[c].originV, dz);
+        }
+        if (!feasible) break;
+        next.taken = i + 1;
+        next.count = w.count + counts[i];
+        w = next;
+        after.push_back(w);
+    }
+    return after[(after.size() - 1) / 8 * 8];
+}
+
+template <typename T>
+void checkRgbVariant(std::size_t (*blocks)(const float*, const T*, const std::uint32_t*, std::size_t,
+                                           const SlopeFrame*, double*, double*, std::uint64_t&),
+                     const char* name) {
+    std::mt19937_64 rng(31);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int ended = 0, whole = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const std::size_t n = rng() % 90;
+        const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
+        const double band = trial % 7 == 0 ? 1e-9 : 0.2 * unit(rng) + 1e-6;
+        SlopeFrame frames[3];
+        double value[3];
+        for (int c = 0; c < 3; ++c) {
+            value[c] = trial % 5 == 0 ? 1.0 : unit(rng);
+            frames[c] = slopeFrame(originZ, value[c], band);
+        }
+        // Each channel falls in its own steps and ramps (a coloured input),
+        // sometimes slowly enough for segments to run past many blocks.
+        std::vector<float> z(n);
+        std::vector<T> v(3 * n);
+        std::vector<std::uint32_t> counts(n);
+        double depth = originZ + 1e-3 * unit(rng);
+        const double fall = trial % 3 == 0 ? 0.002 : 0.05;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (rng() % 3 != 0) depth += 0.05 * unit(rng);
+            z[i] = static_cast<float>(depth);
+            for (std::size_t c = 0; c < 3; ++c) {
+                value[c] = std::max(0.0, value[c] - fall * (c + 1) * 0.5 * unit(rng));
+                v[3 * i + c] = static_cast<T>(value[c]);
+            }
+            counts[i] = static_cast<std::uint32_t>(rng() % 5 == 0 ? 0xffffffffu : rng() % 1000);
+        }
+        // The open segment's windows, as after its first vertex.
+        RgbWalk start{0, {}, {}, 0};
+        for (int c = 0; c < 3; ++c) {
+            const VertexSlopes first = vertexSlopes(static_cast<float>(originZ + 1e-3), frames[c].originV, frames[c]);
+            start.lo[c] = first.bottom;
+            start.hi[c] = first.top;
+        }
+        for (bool withCounts : {false, true}) {
+            const RgbWalk expected = rgbWalkInBlocks(z, v, counts, frames, start);
+            double lo[3], hi[3];
+            std::copy(start.lo, start.lo + 3, lo);
+            std::copy(start.hi, start.hi + 3, hi);
+            std::uint64_t count = 5;
+            const std::size_t taken =
+                blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frames, lo, hi, count);
+            ASSERT_EQ(taken, expected.taken) << name << " trial " << trial;
+            for (int c = 0; c < 3; ++c) {
+                ASSERT_EQ(lo[c], expected.lo[c]) << name << " trial " << trial << " channel " << c;
+                ASSERT_EQ(hi[c], expected.hi[c]) << name << " trial " << trial << " channel " << c;
+            }
+            ASSERT_EQ(count, 5 + (withCounts ? expected.count : 0)) << name << " trial " << trial;
+            if (withCounts) (taken + 8 <= n ? ended : whole) += 1;
+        }
+    }
+    EXPECT_GT(ended, 300) << name;
+    EXPECT_GT(whole, 300) << name;
+}
+
+TEST(SlopeBlocks, BaselineRgbBlocksTakeWhatVertexByVertexWould) {
+    const SlopeBlockVariants baseline = baselineSlopeBlocks();
+    checkRgbVariant(baseline.rgbFloats, "baseline RGB, float values");
+    checkRgbVariant(baseline.rgbDoubles, "baseline RGB, double values");
+}
+
+TEST(SlopeBlocks, Avx2RgbBlocksTakeWhatVertexByVertexWould) {
+    const SlopeBlockVariants avx2 = avx2SlopeBlocks();
+    if (!avx2.rgbFloats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
+    checkRgbVariant(avx2.rgbFloats, "AVX2 RGB, float values");
+    checkRgbVariant(avx2.rgbDoubles, "AVX2 RGB, double values");
 }
 
 // The compressor's centred walk, vertex by vertex (takeCentredVertex()):

@@ -428,6 +428,9 @@ public:
         LongestStretch longest = longest_;
         std::uint64_t count = 0;
         std::size_t i = 0;
+        // Greedy, whole blocks of eight first (the same windows bit for bit).
+        if (!Centred && blocksFit(z, n))
+            i = detail::takeRgbSlopeBlocks(z, v, withCounts ? counts : nullptr, n, frame, lo, hi, count);
         for (; i < n; ++i) {
             const T* values = v + i * C;
             const double dz = static_cast<double>(z[i]) - originZ_;

@@ -9,14 +9,15 @@ SlopeBlockVariants avx2SlopeBlocksCompiled();  // slope_blocks_avx2.cpp
 #endif
 
 SlopeBlockVariants baselineSlopeBlocks() {
-    return {&slopeBlocks<float>, &slopeBlocks<double>, &centredBlocks<float>, &centredBlocks<double>};
+    return {&slopeBlocks<float>,   &slopeBlocks<double>,    &centredBlocks<float>,
+            &centredBlocks<double>, &rgbSlopeBlocks<float>, &rgbSlopeBlocks<double>};
 }
 
 SlopeBlockVariants avx2SlopeBlocks() {
 #ifdef DSM_SLOPE_BLOCKS_AVX2
     if (__builtin_cpu_supports("avx2")) return avx2SlopeBlocksCompiled();
 #endif
-    return {nullptr, nullptr, nullptr, nullptr};
+    return {nullptr, nullptr, nullptr, nullptr, nullptr, nullptr};
 }
 
 namespace {
@@ -39,6 +40,16 @@ std::size_t takeSlopeBlocks(const float* z, const float* v, const double* bands,
 std::size_t takeSlopeBlocks(const float* z, const double* v, const double* bands, const std::uint32_t* counts,
                             std::size_t n, const SlopeFrame& frame, double& lo, double& hi, std::uint64_t& count) {
     return chosenSlopeBlocks().doubles(z, v, bands, counts, n, frame, lo, hi, count);
+}
+
+std::size_t takeRgbSlopeBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,
+                               const SlopeFrame* frames, double* lo, double* hi, std::uint64_t& count) {
+    return chosenSlopeBlocks().rgbFloats(z, v, counts, n, frames, lo, hi, count);
+}
+
+std::size_t takeRgbSlopeBlocks(const float* z, const double* v, const std::uint32_t* counts, std::size_t n,
+                               const SlopeFrame* frames, double* lo, double* hi, std::uint64_t& count) {
+    return chosenSlopeBlocks().rgbDoubles(z, v, counts, n, frames, lo, hi, count);
 }
 
 std::size_t takeCentredBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,

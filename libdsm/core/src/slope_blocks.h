@@ -103,6 +103,19 @@ DSM_TESTED_INTERNAL std::size_t takeSlopeBlocks(const float* z, const double* v,
                                                 const std::uint32_t* counts, std::size_t n, const SlopeFrame& frame,
                                                 double& lo, double& hi, std::uint64_t& count);
 
+// takeSlopeBlocks() for RGB with one band for the run (values[i * 3 + c]):
+// each channel c's window [lo[c], hi[c]] from its frame frames[c] (all at
+// one origin depth), narrowed by whole blocks of eight vertices while every
+// channel's window stays feasible at their last vertex, as the compressor's
+// RGB walk takes them one by one (one depthInverse() a vertex, then
+// slopesScaledBy() for each channel). Same preconditions and result.
+DSM_TESTED_INTERNAL std::size_t takeRgbSlopeBlocks(const float* z, const float* v, const std::uint32_t* counts,
+                                                   std::size_t n, const SlopeFrame* frames, double* lo, double* hi,
+                                                   std::uint64_t& count);
+DSM_TESTED_INTERNAL std::size_t takeRgbSlopeBlocks(const float* z, const double* v, const std::uint32_t* counts,
+                                                   std::size_t n, const SlopeFrame* frames, double* lo, double* hi,
+                                                   std::uint64_t& count);
+
 // A centred segment of one channel along a run (the compressor's
 // extendCentredRunBySlopes()): its window [lo, hi], twice the input's
 // integral from the origin (the trapezoids' halves left out), the last
@@ -231,9 +244,10 @@ DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const float* v
 DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const double* v, const std::uint32_t* counts,
                                                   std::size_t n, const CentredFrame& frame, CentredRun& run);
 
-// takeSlopeBlocks() and takeCentredBlocks() on the baseline instruction set,
-// and on AVX2 (null where the library was built without it, or the processor
-// lacks it): for the tests, which check that the two agree bit for bit.
+// takeSlopeBlocks(), takeCentredBlocks() and takeRgbSlopeBlocks() on the
+// baseline instruction set, and on AVX2 (null where the library was built
+// without it, or the processor lacks it): for the tests, which check that the
+// two agree bit for bit.
 using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const double*, const std::uint32_t*,
                                             std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
 using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const double*, const std::uint32_t*,
@@ -242,11 +256,17 @@ using CentredBlocksOfFloats = std::size_t (*)(const float*, const float*, const 
                                               const CentredFrame&, CentredRun&);
 using CentredBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
                                                const CentredFrame&, CentredRun&);
+using RgbBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
+                                          const SlopeFrame*, double*, double*, std::uint64_t&);
+using RgbBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
+                                           const SlopeFrame*, double*, double*, std::uint64_t&);
 struct SlopeBlockVariants {
     SlopeBlocksOfFloats floats;
     SlopeBlocksOfDoubles doubles;
     CentredBlocksOfFloats centredFloats;
     CentredBlocksOfDoubles centredDoubles;
+    RgbBlocksOfFloats rgbFloats;
+    RgbBlocksOfDoubles rgbDoubles;
 };
 DSM_TESTED_INTERNAL SlopeBlockVariants baselineSlopeBlocks();
 DSM_TESTED_INTERNAL SlopeBlockVariants avx2SlopeBlocks();

@@ -59,8 +59,19 @@ template <typename Mask>
 #endif
 }
 
-// Eight vertices' least top slope and greatest bottom slope, four lanes each,
-// and the last vertex's depth beyond the origin.
+// Four values of one channel of vertices of C channels from v (vertex k's at
+// v[k * C]), as doubles.
+template <int C, typename T>
+[[gnu::always_inline]] inline void loadChannel(const T* v, Double4& out) {
+    if constexpr (C == 1)
+        loadValues(v, out);
+    else
+        out = Double4{static_cast<double>(v[0]), static_cast<double>(v[C]), static_cast<double>(v[2 * C]),
+                      static_cast<double>(v[3 * C])};
+}
+
+// Eight vertices' least top slope and greatest bottom slope of one channel,
+// four lanes each, and the last vertex's depth beyond the origin.
 struct EightSlopes {
     Double4 least, greatest;
     double lastDz;
@@ -87,10 +98,12 @@ template <bool ownBands>
     }
 }
 
-template <bool ownBands, typename T>
+// The slopes of each of C channels (origin values originV[c], offsets
+// offsets[c]) over eight vertices from `at`, with one 1 / dz a vertex.
+template <int C, bool ownBands, typename T>
 [[gnu::always_inline]] inline void eightSlopes(const float* z, const T* v, std::size_t at, float originZ,
-                                               double originV, const Offsets& offsets, EightSlopes& out) {
-    Double4 top[2], bottom[2], dz;
+                                               const double* originV, const Offsets* offsets, EightSlopes* out) {
+    Double4 top[C][2], bottom[C][2], dz;
     for (int h = 0; h < 2; ++h) {
         const std::size_t i = at + 4 * static_cast<std::size_t>(h);
         Float4 depth;
@@ -101,15 +114,19 @@ template <bool ownBands, typename T>
         Double4 q;
         widen(1.0f / (depth - originZ), q);
         const Double4 inverse = q * (2.0 - dz * q);
-        Double4 value, topOffset, bottomOffset;
-        loadValues(v + i, value);
-        offsetsOf<ownBands>(offsets, originV, i, topOffset, bottomOffset);
-        top[h] = (value + topOffset) * inverse;
-        bottom[h] = (value + bottomOffset) * inverse;
+        for (int c = 0; c < C; ++c) {
+            Double4 value, topOffset, bottomOffset;
+            loadChannel<C>(v + i * static_cast<std::size_t>(C) + static_cast<std::size_t>(c), value);
+            offsetsOf<ownBands>(offsets[c], originV[c], i, topOffset, bottomOffset);
+            top[c][h] = (value + topOffset) * inverse;
+            bottom[c][h] = (value + bottomOffset) * inverse;
+        }
     }
-    out.least = top[1] < top[0] ? top[1] : top[0];
-    out.greatest = bottom[1] > bottom[0] ? bottom[1] : bottom[0];
-    out.lastDz = dz[3];
+    for (int c = 0; c < C; ++c) {
+        out[c].least = top[c][1] < top[c][0] ? top[c][1] : top[c][0];
+        out[c].greatest = bottom[c][1] > bottom[c][0] ? bottom[c][1] : bottom[c][0];
+        out[c].lastDz = dz[3];
+    }
 }
 
 // Whether the window of four lanes each way (its bounds the least hi and the
@@ -130,52 +147,72 @@ template <bool withCounts>
     }
 }
 
-// `blocks` blocks of eight vertices, taken when the window (hi, lo) narrowed
-// by all of them is feasible at their last vertex; otherwise the window is
-// left as it was. Returns whether it took them.
-template <int blocks, bool withCounts, bool ownBands, typename T>
+// `blocks` blocks of eight vertices, taken when every channel's window (hi[c],
+// lo[c]) narrowed by all of them is feasible at their last vertex; otherwise
+// the windows are left as they were. Returns whether it took them.
+template <int blocks, int C, bool withCounts, bool ownBands, typename T>
 [[gnu::always_inline]] inline bool takeBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t at,
-                                              float originZ, double originV, const Offsets& offsets, Double4& hi,
-                                              Double4& lo, Sum4& sum) {
-    Double4 nextHi = hi, nextLo = lo;
+                                              float originZ, const double* originV, const Offsets* offsets,
+                                              Double4* hi, Double4* lo, Sum4& sum) {
+    Double4 nextHi[C], nextLo[C];
+    for (int c = 0; c < C; ++c) {
+        nextHi[c] = hi[c];
+        nextLo[c] = lo[c];
+    }
     double lastDz = 0.0;
     for (int b = 0; b < blocks; ++b) {
-        EightSlopes slopes;
-        eightSlopes<ownBands>(z, v, at + 8 * static_cast<std::size_t>(b), originZ, originV, offsets, slopes);
-        nextHi = slopes.least < nextHi ? slopes.least : nextHi;
-        nextLo = slopes.greatest > nextLo ? slopes.greatest : nextLo;
-        lastDz = slopes.lastDz;
+        EightSlopes slopes[C];
+        eightSlopes<C, ownBands>(z, v, at + 8 * static_cast<std::size_t>(b), originZ, originV, offsets, slopes);
+        for (int c = 0; c < C; ++c) {
+            nextHi[c] = slopes[c].least < nextHi[c] ? slopes[c].least : nextHi[c];
+            nextLo[c] = slopes[c].greatest > nextLo[c] ? slopes[c].greatest : nextLo[c];
+        }
+        lastDz = slopes[0].lastDz;
     }
-    if (!feasibleLanes(nextHi, nextLo, originV, lastDz)) return false;
-    hi = nextHi;
-    lo = nextLo;
+    bool feasible = true;
+    for (int c = 0; c < C; ++c) feasible &= feasibleLanes(nextHi[c], nextLo[c], originV[c], lastDz);
+    if (!feasible) return false;
+    for (int c = 0; c < C; ++c) {
+        hi[c] = nextHi[c];
+        lo[c] = nextLo[c];
+    }
     for (int b = 0; b < blocks; ++b) addCounts<withCounts>(counts, at + 8 * static_cast<std::size_t>(b), sum);
     return true;
 }
 
-// The window is kept as four lanes each way, its bounds the least and the
-// greatest lane, so that a block narrows it by one vector operation. Blocks
-// go four at a time, so that the test of the window (which reduces the lanes)
-// is made once for 32 vertices; where the segment ends within four blocks,
-// they are taken again one at a time (their slopes computed again), so that
-// at most one block is left to be walked vertex by vertex.
-template <bool withCounts, bool ownBands, typename T>
+// Each channel's window is kept as four lanes each way, its bounds the least
+// and the greatest lane, so that a block narrows it by one vector operation.
+// Blocks go four at a time, so that the test of the windows (which reduces
+// the lanes) is made once for 32 vertices; where the segment ends within four
+// blocks, they are taken again one at a time (their slopes computed again),
+// so that at most one block is left to be walked vertex by vertex.
+template <int C, bool withCounts, bool ownBands, typename T>
 std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const std::uint32_t* counts,
-                          std::size_t n, const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
-    // Locals, not the references and the frame: stores through those could
+                          std::size_t n, const SlopeFrame* f, double* lo, double* hi, std::uint64_t& count) {
+    // Locals, not the pointers and the frames: stores through those could
     // alias the input as far as the compiler knows.
-    const float originZ = f.originZ;
-    const double originV = f.originV;
-    const Offsets offsets{f.topOffset, f.bottomOffset, ownBands ? bands : nullptr};
-    Double4 windowLo = {lo, lo, lo, lo}, windowHi = {hi, hi, hi, hi};
+    const float originZ = f[0].originZ;
+    double originV[C];
+    Offsets offsets[C];
+    Double4 windowLo[C], windowHi[C];
+    for (int c = 0; c < C; ++c) {
+        originV[c] = f[c].originV;
+        offsets[c] = Offsets{f[c].topOffset, f[c].bottomOffset, ownBands ? bands : nullptr};
+        windowLo[c] = Double4{lo[c], lo[c], lo[c], lo[c]};
+        windowHi[c] = Double4{hi[c], hi[c], hi[c], hi[c]};
+    }
     std::size_t i = 0;
     Sum4 sum = {};
-    while (i + 32 <= n && takeBlocks<4, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
+    while (i + 32 <= n &&
+           takeBlocks<4, C, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
         i += 32;
-    while (i + 8 <= n && takeBlocks<1, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
+    while (i + 8 <= n &&
+           takeBlocks<1, C, withCounts, ownBands>(z, v, counts, i, originZ, originV, offsets, windowHi, windowLo, sum))
         i += 8;
-    hi = leastLane(windowHi);
-    lo = greatestLane(windowLo);
+    for (int c = 0; c < C; ++c) {
+        hi[c] = leastLane(windowHi[c]);
+        lo[c] = greatestLane(windowLo[c]);
+    }
     count += sum[0] + sum[1] + sum[2] + sum[3];
     return i;
 }
@@ -432,10 +469,17 @@ template <typename T>
 std::size_t slopeBlocks(const float* z, const T* v, const double* bands, const std::uint32_t* counts, std::size_t n,
                         const SlopeFrame& f, double& lo, double& hi, std::uint64_t& count) {
     if (bands)
-        return counts ? slopeBlocksOf<true, true>(z, v, bands, counts, n, f, lo, hi, count)
-                      : slopeBlocksOf<false, true>(z, v, bands, counts, n, f, lo, hi, count);
-    return counts ? slopeBlocksOf<true, false>(z, v, bands, counts, n, f, lo, hi, count)
-                  : slopeBlocksOf<false, false>(z, v, bands, counts, n, f, lo, hi, count);
+        return counts ? slopeBlocksOf<1, true, true>(z, v, bands, counts, n, &f, &lo, &hi, count)
+                      : slopeBlocksOf<1, false, true>(z, v, bands, counts, n, &f, &lo, &hi, count);
+    return counts ? slopeBlocksOf<1, true, false>(z, v, bands, counts, n, &f, &lo, &hi, count)
+                  : slopeBlocksOf<1, false, false>(z, v, bands, counts, n, &f, &lo, &hi, count);
+}
+
+template <typename T>
+std::size_t rgbSlopeBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                           const SlopeFrame* frames, double* lo, double* hi, std::uint64_t& count) {
+    return counts ? slopeBlocksOf<3, true, false>(z, v, nullptr, counts, n, frames, lo, hi, count)
+                  : slopeBlocksOf<3, false, false>(z, v, nullptr, counts, n, frames, lo, hi, count);
 }
 
 }  // namespace
