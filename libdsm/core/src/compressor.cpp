@@ -355,7 +355,6 @@ public:
                                                            const double* bands = nullptr) {
         if (n == 0) return 0;
         const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
-        const double origin = frame.slopes.originV;
         detail::CentredRun r{window_[0].lo(), window_[0].hi(), twiceIntegral_[0], lastZ_, inputV_[0], 0,
                              longest_.length, longest_.endDz, longest_.endV[0], detail::kNotBalanced, 0.0, 0.0, 0.0,
                              0, 0.0, 0.0, 0.0};
@@ -371,32 +370,70 @@ public:
             for (; i < n; ++i)
                 if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
         }
+        CentredState<1> atBalance, after;
+        if (r.balancedAt != detail::kNotBalanced)
+            atBalance = {{r.balancedLo},
+                         {r.balancedHi},
+                         {r.balancedIntegral},
+                         {static_cast<double>(v[r.balancedAt])},
+                         {r.balancedLongest, r.balancedLongestEndDz, {r.balancedLongestEndV}},
+                         r.balancedCount};
+        after = {{r.lo}, {r.hi}, {r.twiceIntegral}, {r.previousV}, {r.longest, r.longestEndDz, {r.longestEndV}},
+                 r.count};
+        return endCentredRun<1>(z, v, withCounts ? counts : nullptr, n, i, band, bands, r.balancedAt, atBalance,
+                                after);
+    }
+
+    // A centred segment's state after a vertex, in slopes: each channel's
+    // window [lo, hi], twice the input's integral and the input's value
+    // there, the longest stretch so far, and the counts a run took.
+    template <int C>
+    struct CentredState {
+        double lo[C], hi[C], twiceIntegral[C], inputV[C];
+        LongestStretch longest;
+        std::uint64_t count;
+    };
+
+    // Ends a centred run of C channels that took its vertices up to i
+    // (exclusive). Its last balanced vertex b (kNotBalanced when none; its
+    // state atBalance) becomes the balanced point. When the segment then
+    // closes within the run (i < n) and none of its vertices waits from an
+    // earlier run, it closes at b here, and the count returned ends there:
+    // the caller takes the vertices after it again from its own arrays, as
+    // replay() would take them from copies. Otherwise the vertices after b
+    // wait in pending_ (each of band bands[k], or all of `band`), as
+    // notePoint() would leave them vertex by vertex; the state after the run
+    // becomes the open segment's, and i is returned. Inlined: a call and its
+    // copies of the states cost a one-channel run 2 % more instructions.
+    template <int C, typename T>
+    [[gnu::always_inline]] std::size_t endCentredRun(const float* z, const T* v, const std::uint32_t* counts,
+                                                     std::size_t n, std::size_t i, double band, const double* bands,
+                                                     std::size_t b, const CentredState<C>& atBalance,
+                                                     const CentredState<C>& after) {
+        constexpr std::size_t nc = C;
         std::size_t waiting = 0;  // the first of the run's vertices after its balanced point
-        if (r.balancedAt != detail::kNotBalanced) {
-            const std::size_t b = r.balancedAt;
-            const SlopeWindow w = SlopeWindow::ofSlopes(r.balancedLo, r.balancedHi, origin);
-            const double inputV = static_cast<double>(v[b]);
-            LongestStretch longest;
-            longest.length = r.balancedLongest;
-            longest.endDz = r.balancedLongestEndDz;
-            longest.endV[0] = r.balancedLongestEndV;
-            notePoint<1>(true, &w, &r.balancedIntegral, longest, &inputV, z[b], &v[b], withCounts ? counts[b] : 0u,
-                         band, segmentCount_ + r.balancedCount);
+        if (b != detail::kNotBalanced) {
+            SlopeWindow w[C];
+            for (int c = 0; c < C; ++c) w[c] = SlopeWindow::ofSlopes(atBalance.lo[c], atBalance.hi[c], originV_[c]);
+            notePoint<C>(true, w, atBalance.twiceIntegral, atBalance.longest, atBalance.inputV, z[b], v + b * nc,
+                         counts ? counts[b] : 0u, band, segmentCount_ + atBalance.count);
             waiting = b + 1;
         }
         if (balancedPoint_.valid && pending_.empty() && i < n && i > waiting && i - waiting <= kMostPending) {
-            closeSegment<1>(true);
+            closeSegment<C>(true);
             return waiting;
         }
-        noteUnbalanced<1>(z + waiting, v + waiting, withCounts ? counts + waiting : nullptr, i - waiting, band,
+        noteUnbalanced<C>(z + waiting, v + waiting * nc, counts ? counts + waiting : nullptr, i - waiting, band,
                           bands ? bands + waiting : nullptr);
-        window_[0] = SlopeWindow::ofSlopes(r.lo, r.hi, origin);
-        twiceIntegral_[0] = r.twiceIntegral;
-        longest_.length = r.longest;
-        longest_.endDz = r.longestEndDz;
-        longest_.endV[0] = r.longestEndV;
-        inputV_[0] = r.previousV;
-        segmentCount_ += r.count;
+        for (int c = 0; c < C; ++c) {
+            window_[c] = SlopeWindow::ofSlopes(after.lo[c], after.hi[c], originV_[c]);
+            twiceIntegral_[c] = after.twiceIntegral[c];
+            inputV_[c] = after.inputV[c];
+            longest_.endV[c] = after.longest.endV[c];
+        }
+        longest_.length = after.longest.length;
+        longest_.endDz = after.longest.endDz;
+        segmentCount_ += after.count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
     }
@@ -404,10 +441,10 @@ public:
     // extendRun() for RGB with a band > 0: each channel's window as two
     // slopes and each vertex's bounds as vertexSlopes() makes them, with one
     // 1 / dz for the three channels; the segment takes a vertex while every
-    // channel's window stays feasible. Centred, a vertex at which every
-    // channel can be balanced (balancedInSlopes(), the test of balanced()
-    // without its divisions) becomes the balanced point, as noteBalance()
-    // would make it; the others wait in pending_.
+    // channel's window stays feasible. Centred, the run's last vertex at
+    // which every channel can be balanced (balancedInSlopes(), the test of
+    // balanced() without its divisions) is kept by its index, and the run
+    // ends as a one-channel centred run does (endCentredRun()).
     template <bool withCounts, bool Centred, typename T>
     std::size_t extendRgbRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
                                      double band) {
@@ -427,6 +464,10 @@ public:
         double previousZ = lastZ_;
         LongestStretch longest = longest_;
         std::uint64_t count = 0;
+        // Centred: the run's last balanced vertex, kept by its index, and
+        // the segment's state there (endCentredRun()).
+        std::size_t balancedAt = detail::kNotBalanced;
+        CentredState<C> atBalance;
         std::size_t i = 0;
         // Greedy, whole blocks of eight first (the same windows bit for bit).
         if (!Centred && blocksFit(z, n))
@@ -446,8 +487,7 @@ public:
             if (!feasible) break;
             std::copy(nextLo, nextLo + C, lo);
             std::copy(nextHi, nextHi + C, hi);
-            const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
-            count += vertexCount;
+            if constexpr (withCounts) count += counts[i];
             if constexpr (Centred) {
                 const double step = static_cast<double>(z[i]) - previousZ;
                 previousZ = z[i];
@@ -466,21 +506,33 @@ public:
                     isBalanced &= detail::balancedInSlopes(lo[c], hi[c], twiceIntegral[c], value, inverse, plateau,
                                                            longest.endDz, longest.endV[c], frame[c].originV, margin);
                 });
-                SlopeWindow w[C];
-                if (isBalanced)
-                    forEachChannel<C>([&](int c) { w[c] = SlopeWindow::ofSlopes(lo[c], hi[c], frame[c].originV); });
-                notePoint<C>(isBalanced, w, twiceIntegral, longest, previousV, z[i], values, vertexCount, band,
-                             segmentCount_ + count);
+                if (isBalanced) {
+                    balancedAt = i;
+                    forEachChannel<C>([&](int c) {
+                        atBalance.lo[c] = lo[c];
+                        atBalance.hi[c] = hi[c];
+                        atBalance.twiceIntegral[c] = twiceIntegral[c];
+                        atBalance.inputV[c] = previousV[c];
+                    });
+                    atBalance.longest = longest;
+                    atBalance.count = count;
+                }
             }
         }
-        forEachChannel<C>([&](int c) {
-            window_[c] = SlopeWindow::ofSlopes(lo[c], hi[c], frame[c].originV);
-            if constexpr (Centred) {
-                twiceIntegral_[c] = twiceIntegral[c];
-                inputV_[c] = previousV[c];
-            }
-        });
-        if constexpr (Centred) longest_ = longest;
+        if constexpr (Centred) {
+            CentredState<C> after;
+            forEachChannel<C>([&](int c) {
+                after.lo[c] = lo[c];
+                after.hi[c] = hi[c];
+                after.twiceIntegral[c] = twiceIntegral[c];
+                after.inputV[c] = previousV[c];
+            });
+            after.longest = longest;
+            after.count = count;
+            return endCentredRun<C>(z, v, withCounts ? counts : nullptr, n, i, band, nullptr, balancedAt, atBalance,
+                                    after);
+        }
+        forEachChannel<C>([&](int c) { window_[c] = SlopeWindow::ofSlopes(lo[c], hi[c], frame[c].originV); });
         segmentCount_ += count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
