@@ -220,11 +220,12 @@ TEST(SlopeBlocks, Avx2RgbBlocksTakeWhatVertexByVertexWould) {
 // the run state after each vertex while the window stays feasible.
 template <typename T>
 std::vector<CentredRun> centredWalk(const std::vector<float>& z, const std::vector<T>& v,
-                                    const std::vector<std::uint32_t>* counts, const CentredFrame& frame,
-                                    CentredRun r) {
+                                    const std::vector<double>* bands, const std::vector<std::uint32_t>* counts,
+                                    const CentredFrame& frame, CentredRun r) {
     std::vector<CentredRun> after{r};
     for (std::size_t i = 0; i < z.size(); ++i) {
-        if (!takeCentredVertex(z[i], v[i], counts ? (*counts)[i] : 0u, i, frame, r)) break;
+        const CentredFrame own = bands ? CentredFrame{withBand(frame.slopes, (*bands)[i]), frame.margin} : frame;
+        if (!takeCentredVertex(z[i], v[i], counts ? (*counts)[i] : 0u, i, own, r)) break;
         after.push_back(r);
     }
     return after;
@@ -236,8 +237,8 @@ void expectSameBits(double a, double b, const std::string& what) {
 }
 
 template <typename T>
-void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std::uint32_t*, std::size_t,
-                                               const CentredFrame&, CentredRun&),
+void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const double*, const std::uint32_t*,
+                                               std::size_t, const CentredFrame&, CentredRun&),
                          const char* name) {
     std::mt19937_64 rng(41);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
@@ -253,6 +254,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
         std::vector<float> z(n);
         std::vector<T> v(n);
         std::vector<std::uint32_t> counts(n);
+        std::vector<double> bands(n);  // each vertex's own (grey RGB input)
         double depth = originZ + 1e-3 * unit(rng), value = originV;
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
@@ -262,6 +264,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
             z[i] = static_cast<float>(depth);
             v[i] = static_cast<T>(value);
             counts[i] = static_cast<std::uint32_t>(rng() % 5 == 0 ? 0xffffffffu : rng() % 1000);
+            bands[i] = band * (0.5 + 0.5 * unit(rng));
         }
         // An open segment, as after its first vertex, with something already
         // summed and balanced.
@@ -269,8 +272,10 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
         const VertexSlopes first = vertexSlopes(firstZ, originV, frame.slopes);
         const CentredRun start{first.bottom, first.top, 2e-3 * originV, firstZ, originV, 7, 1e-3,
                                1e-3, originV, 3, first.bottom, first.top, 1e-3, 2, 1e-3, 1e-3, originV};
-        for (bool withCounts : {false, true}) {
-            const std::vector<CentredRun> walk = centredWalk(z, v, withCounts ? &counts : nullptr, frame, start);
+        for (int variant = 0; variant < 3; ++variant) {
+            const bool withCounts = variant != 0, ownBands = variant == 2;
+            const std::vector<CentredRun> walk =
+                centredWalk(z, v, ownBands ? &bands : nullptr, withCounts ? &counts : nullptr, frame, start);
             // Whole blocks, and the vertices of the block where the segment
             // ends before the one that ends it; a run's last few are left.
             const std::size_t walked = walk.size() - 1, wholeBlocks = walked / 8 * 8;
@@ -278,8 +283,10 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
             const std::size_t taken = endsInBlock ? walked : wholeBlocks;
             const CentredRun& expected = walk[taken];
             CentredRun got = start;
-            const std::size_t took = blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, got);
-            const std::string what = std::string(name) + " trial " + std::to_string(trial);
+            const std::size_t took = blocks(z.data(), v.data(), ownBands ? bands.data() : nullptr,
+                                            withCounts ? counts.data() : nullptr, n, frame, got);
+            const std::string what =
+                std::string(name) + " trial " + std::to_string(trial) + (ownBands ? ", own bands" : "");
             ASSERT_EQ(took, taken) << what;
             expectSameBits(got.lo, expected.lo, what + " lo");
             expectSameBits(got.hi, expected.hi, what + " hi");
@@ -300,7 +307,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const std
             expectSameBits(got.balancedLongestEndV, expected.balancedLongestEndV, what + " balanced longest end value");
             EXPECT_EQ(got.balancedCount, expected.balancedCount) << what;
             if (::testing::Test::HasFailure()) return;
-            if (withCounts) {
+            if (withCounts && !ownBands) {
                 (endsInBlock ? ended : whole) += 1;
                 if (endsInBlock && walked % 8 != 0) ++endedPartWay;
                 if (expected.balancedAt != start.balancedAt) ++balancedInBlocks;

@@ -359,6 +359,7 @@ public:
                              longest_.length, longest_.endDz, longest_.endV[0], detail::kNotBalanced, 0.0, 0.0, 0.0,
                              0, 0.0, 0.0, 0.0};
         std::size_t i = 0;
+        if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, bands, withCounts ? counts : nullptr, n, frame, r);
         if (bands) {
             // The margin stays the run's: balanced() measures it from band_ too.
             for (; i < n; ++i) {
@@ -366,7 +367,6 @@ public:
                 if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, own, r)) break;
             }
         } else {
-            if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, withCounts ? counts : nullptr, n, frame, r);
             for (; i < n; ++i)
                 if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
         }

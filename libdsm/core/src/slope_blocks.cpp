@@ -52,14 +52,14 @@ std::size_t takeRgbSlopeBlocks(const float* z, const double* v, const std::uint3
     return chosenSlopeBlocks().rgbDoubles(z, v, counts, n, frames, lo, hi, count);
 }
 
-std::size_t takeCentredBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,
-                              const CentredFrame& frame, CentredRun& run) {
-    return chosenSlopeBlocks().centredFloats(z, v, counts, n, frame, run);
+std::size_t takeCentredBlocks(const float* z, const float* v, const double* bands, const std::uint32_t* counts,
+                              std::size_t n, const CentredFrame& frame, CentredRun& run) {
+    return chosenSlopeBlocks().centredFloats(z, v, bands, counts, n, frame, run);
 }
 
-std::size_t takeCentredBlocks(const float* z, const double* v, const std::uint32_t* counts, std::size_t n,
-                              const CentredFrame& frame, CentredRun& run) {
-    return chosenSlopeBlocks().centredDoubles(z, v, counts, n, frame, run);
+std::size_t takeCentredBlocks(const float* z, const double* v, const double* bands, const std::uint32_t* counts,
+                              std::size_t n, const CentredFrame& frame, CentredRun& run) {
+    return chosenSlopeBlocks().centredDoubles(z, v, bands, counts, n, frame, run);
 }
 
 }  // namespace dsm::detail

@@ -236,13 +236,17 @@ static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::siz
 // it, bit for bit. Whole blocks go while the window stays feasible at their
 // last vertex; of the block where the segment ends, the vertices before the
 // one that ends it. Returns how many vertices it took: the run's last
-// vertices short of a block are left to the walk. Preconditions as
-// takeSlopeBlocks()'s (depths never fall, every depth difference from the
+// vertices short of a block are left to the walk. Each vertex's band is
+// the frame's, or bands[i] when bands is not null (the walk's frame then
+// withBand(frame.slopes, bands[i]), its margin the frame's). Preconditions
+// as takeSlopeBlocks()'s (depths never fall, every depth difference from the
 // origin in [kLeastFastDepth, kMostFastDepth]).
-DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const float* v, const std::uint32_t* counts,
-                                                  std::size_t n, const CentredFrame& frame, CentredRun& run);
-DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const double* v, const std::uint32_t* counts,
-                                                  std::size_t n, const CentredFrame& frame, CentredRun& run);
+DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const float* v, const double* bands,
+                                                  const std::uint32_t* counts, std::size_t n,
+                                                  const CentredFrame& frame, CentredRun& run);
+DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const double* v, const double* bands,
+                                                  const std::uint32_t* counts, std::size_t n,
+                                                  const CentredFrame& frame, CentredRun& run);
 
 // takeSlopeBlocks(), takeCentredBlocks() and takeRgbSlopeBlocks() on the
 // baseline instruction set, and on AVX2 (null where the library was built
@@ -252,10 +256,10 @@ using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const do
                                             std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
 using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const double*, const std::uint32_t*,
                                              std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
-using CentredBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
-                                              const CentredFrame&, CentredRun&);
-using CentredBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
-                                               const CentredFrame&, CentredRun&);
+using CentredBlocksOfFloats = std::size_t (*)(const float*, const float*, const double*, const std::uint32_t*,
+                                              std::size_t, const CentredFrame&, CentredRun&);
+using CentredBlocksOfDoubles = std::size_t (*)(const float*, const double*, const double*, const std::uint32_t*,
+                                               std::size_t, const CentredFrame&, CentredRun&);
 using RgbBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
                                           const SlopeFrame*, double*, double*, std::uint64_t&);
 using RgbBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,

@@ -276,15 +276,15 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
 // integral is summed lane after lane, as the walk sums it (a sum's rounding
 // depends on its order). A block is taken whole when the window after it is
 // feasible at its last vertex; otherwise each lane's window is tested, and
-// the block is taken up to the first lane where it is not feasible.
-template <bool withCounts, typename T>
-std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
-                            const CentredFrame& f, CentredRun& run) {
+// the block is taken up to the first lane where it is not feasible. Each
+// vertex's band is the frame's, or bands[i] (ownBands); the margin is the
+// frame's either way.
+template <bool withCounts, bool ownBands, typename T>
+std::size_t centredBlocksOf(const float* z, const T* v, const double* bands, const std::uint32_t* counts,
+                            std::size_t n, const CentredFrame& f, CentredRun& run) {
     const float originZ = f.slopes.originZ;
     const double origin = f.slopes.originV, margin = f.margin;
-    const Double4 topOffset = {f.slopes.topOffset, f.slopes.topOffset, f.slopes.topOffset, f.slopes.topOffset};
-    const Double4 bottomOffset = {f.slopes.bottomOffset, f.slopes.bottomOffset, f.slopes.bottomOffset,
-                                  f.slopes.bottomOffset};
+    const Offsets offsets{f.slopes.topOffset, f.slopes.bottomOffset, ownBands ? bands : nullptr};
     const Double4 zero = {};
     CentredRun r = run;  // a local: stores through `run` could alias the input as far as the compiler knows
     std::size_t i = 0;
@@ -307,6 +307,8 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
             inverse[h] = q * (2.0 - dz * q);
             loadValues(v + i + 4 * h, value[h]);
             lastDz = dz[3];
+            Double4 topOffset, bottomOffset;
+            offsetsOf<ownBands>(offsets, origin, i + 4 * h, topOffset, bottomOffset);
             const Double4 tops = (value[h] + topOffset) * inverse[h];
             const Double4 bottoms = (value[h] + bottomOffset) * inverse[h];
             Double4 hiSoFar, loSoFar;
@@ -460,9 +462,13 @@ std::size_t centredBlocksOf(const float* z, const T* v, const std::uint32_t* cou
 }
 
 template <typename T>
-std::size_t centredBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
-                          const CentredFrame& f, CentredRun& run) {
-    return counts ? centredBlocksOf<true>(z, v, counts, n, f, run) : centredBlocksOf<false>(z, v, counts, n, f, run);
+std::size_t centredBlocks(const float* z, const T* v, const double* bands, const std::uint32_t* counts,
+                          std::size_t n, const CentredFrame& f, CentredRun& run) {
+    if (bands)
+        return counts ? centredBlocksOf<true, true>(z, v, bands, counts, n, f, run)
+                      : centredBlocksOf<false, true>(z, v, bands, counts, n, f, run);
+    return counts ? centredBlocksOf<true, false>(z, v, bands, counts, n, f, run)
+                  : centredBlocksOf<false, false>(z, v, bands, counts, n, f, run);
 }
 
 template <typename T>
