@@ -339,14 +339,10 @@ public:
     // vertex's 1 / dz instead of the divisions of balanced(): the same test
     // (takeCentredVertex()). Blocks of eight go at once where they can
     // (takeCentredBlocks(), the same arithmetic), the run's last few vertices
-    // one by one. The run's last balanced vertex is kept by its index, and
-    // the vertices after it go to pending_ together at the end: what
-    // notePoint() would leave, vertex by vertex. But when the segment closes
-    // within the run and none of its vertices waits from an earlier run (its
-    // balanced point is in this run, or just before it), it closes here, at
-    // that point, and the count returned ends there: the caller takes the
-    // vertices after it again from its own arrays, as replay() would take
-    // them from copies.
+    // one by one. Each vertex's band is `band`, or bands[i] (grey RGB). The
+    // run's last balanced vertex is kept by its index, and the run ends as
+    // endCentredRun() says: the segment may close at that vertex within the
+    // run, the count returned then ending there.
     // Not inlined: extendOne() would otherwise carry all of it into the
     // greedy rule's vertex-by-vertex push().
     template <bool withCounts, typename T>
@@ -540,8 +536,8 @@ public:
 
     // extendRun() of one channel whose vertices have bands of their own (grey
     // RGB input: the channels' mid-range, its band narrowed by their spread),
-    // each > 0. Centred, the segment may close early within the run, as in
-    // extendCentredRunBySlopes(), whose walk then takes them one by one.
+    // each > 0. Centred, they go through extendCentredRunBySlopes() with
+    // their bands, and the segment may close early within the run.
     std::size_t extendGreyRun(const float* z, const double* mids, const double* bands, const std::uint32_t* counts,
                               std::size_t n) {
         if (!open_) return 0;
