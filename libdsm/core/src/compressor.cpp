@@ -176,6 +176,29 @@ public:
         return counts ? extendRun<C, true, false>(z, v, counts, n, band) : extendRun<C, false, false>(z, v, counts, n, band);
     }
 
+    // A centred segment's input advanced by a vertex at depth z, dz beyond
+    // the origin, with values v[c]: twice its integral (the trapezoid from
+    // the previous vertex), its last vertex, and its longest stretch between
+    // vertices (the first of equals). The walks of takeCentredVertex() and
+    // the centred blocks do the same for one channel, in that order.
+    template <int C, typename T>
+    static void advanceInput(float z, double dz, const T* v, double& previousZ, LongestStretch& longest,
+                             double* twiceIntegral, double* previousV) {
+        const double step = static_cast<double>(z) - previousZ;
+        previousZ = z;
+        const bool longer = step > longest.length;
+        if (longer) {
+            longest.length = step;
+            longest.endDz = dz;
+        }
+        forEachChannel<C>([&](int c) {
+            const double value = static_cast<double>(v[c]);
+            twiceIntegral[c] += step * (previousV[c] + value);
+            previousV[c] = value;
+            if (longer) longest.endV[c] = value;
+        });
+    }
+
     // With a band > 0 the window is kept as slopes (below); a band of 0 keeps
     // the exact cross products here. A vertex that moves bounds updates them
     // by branches for one channel (on smooth input nearly every vertex moves
@@ -257,19 +280,7 @@ public:
             }
             if constexpr (withCounts) count += counts[i];
             if constexpr (Centred) {
-                const double step = static_cast<double>(z[i]) - previousZ;
-                previousZ = z[i];
-                const bool longer = step > longest.length;
-                if (longer) {
-                    longest.length = step;
-                    longest.endDz = dz;
-                }
-                forEachChannel<C>([&](int c) {
-                    const double value = static_cast<double>(v[i * C + static_cast<std::size_t>(c)]);
-                    twiceIntegral[c] += step * (previousV[c] + value);
-                    previousV[c] = value;
-                    if (longer) longest.endV[c] = value;
-                });
+                advanceInput<C>(z[i], dz, &v[i * C], previousZ, longest, twiceIntegral, previousV);
                 const std::uint32_t vertexCount = withCounts ? counts[i] : 0u;
                 noteBalance<C>(w, twiceIntegral, longest, previousV, z[i], &v[i * C], vertexCount, band,
                                segmentCount_ + count);
@@ -485,22 +496,13 @@ public:
             std::copy(nextHi, nextHi + C, hi);
             if constexpr (withCounts) count += counts[i];
             if constexpr (Centred) {
-                const double step = static_cast<double>(z[i]) - previousZ;
-                previousZ = z[i];
-                const bool longer = step > longest.length;
-                if (longer) {
-                    longest.length = step;
-                    longest.endDz = dz;
-                }
+                advanceInput<C>(z[i], dz, values, previousZ, longest, twiceIntegral, previousV);
                 const bool plateau = detail::isPlateau(longest.length, dz);
                 bool isBalanced = true;
                 forEachChannel<C>([&](int c) {
-                    const double value = static_cast<double>(values[c]);
-                    twiceIntegral[c] += step * (previousV[c] + value);
-                    previousV[c] = value;
-                    if (longer) longest.endV[c] = value;
-                    isBalanced &= detail::balancedInSlopes(lo[c], hi[c], twiceIntegral[c], value, inverse, plateau,
-                                                           longest.endDz, longest.endV[c], frame[c].originV, margin);
+                    isBalanced &= detail::balancedInSlopes(lo[c], hi[c], twiceIntegral[c], previousV[c], inverse,
+                                                           plateau, longest.endDz, longest.endV[c], frame[c].originV,
+                                                           margin);
                 });
                 if (isBalanced) {
                     balancedAt = i;
