@@ -217,15 +217,16 @@ TEST(SlopeBlocks, Avx2RgbBlocksTakeWhatVertexByVertexWould) {
 }
 
 // The compressor's centred walk, vertex by vertex (takeCentredVertex()):
-// the run state after each vertex while the window stays feasible.
-template <typename T>
-std::vector<CentredRun> centredWalk(const std::vector<float>& z, const std::vector<T>& v,
-                                    const std::vector<double>* bands, const std::vector<std::uint32_t>* counts,
-                                    const CentredFrame& frame, CentredRun r) {
-    std::vector<CentredRun> after{r};
+// the run state after each vertex while the windows stay feasible.
+template <int C, typename T>
+std::vector<CentredRunOf<C>> centredWalk(const std::vector<float>& z, const std::vector<T>& v,
+                                         const std::vector<double>* bands, const std::vector<std::uint32_t>* counts,
+                                         const CentredFrameOf<C>& frame, CentredRunOf<C> r) {
+    std::vector<CentredRunOf<C>> after{r};
     for (std::size_t i = 0; i < z.size(); ++i) {
-        const CentredFrame own = bands ? CentredFrame{withBand(frame.slopes, (*bands)[i]), frame.margin} : frame;
-        if (!takeCentredVertex(z[i], v[i], counts ? (*counts)[i] : 0u, i, own, r)) break;
+        const CentredFrameOf<C> own =
+            bands ? CentredFrameOf<C>{{withBand(frame.slopes[0], (*bands)[i])}, frame.margin} : frame;
+        if (!takeCentredVertex(z[i], v.data() + i * C, counts ? (*counts)[i] : 0u, i, own, r)) break;
         after.push_back(r);
     }
     return after;
@@ -234,6 +235,43 @@ std::vector<CentredRun> centredWalk(const std::vector<float>& z, const std::vect
 // Equal bit for bit (a zero's sign included).
 void expectSameBits(double a, double b, const std::string& what) {
     EXPECT_EQ(std::bit_cast<std::uint64_t>(a), std::bit_cast<std::uint64_t>(b)) << what << ": " << a << " " << b;
+}
+
+// Every field of two run states equal bit for bit.
+template <int C>
+void expectSameRun(const CentredRunOf<C>& got, const CentredRunOf<C>& expected, const std::string& what) {
+    for (int c = 0; c < C; ++c) {
+        const std::string channel = what + (C > 1 ? " channel " + std::to_string(c) : std::string());
+        expectSameBits(got.lo[c], expected.lo[c], channel + " lo");
+        expectSameBits(got.hi[c], expected.hi[c], channel + " hi");
+        expectSameBits(got.twiceIntegral[c], expected.twiceIntegral[c], channel + " integral");
+        expectSameBits(got.previousV[c], expected.previousV[c], channel + " previous value");
+        expectSameBits(got.longestEndV[c], expected.longestEndV[c], channel + " longest stretch's end value");
+        expectSameBits(got.balancedLo[c], expected.balancedLo[c], channel + " balanced lo");
+        expectSameBits(got.balancedHi[c], expected.balancedHi[c], channel + " balanced hi");
+        expectSameBits(got.balancedIntegral[c], expected.balancedIntegral[c], channel + " balanced integral");
+        expectSameBits(got.balancedLongestEndV[c], expected.balancedLongestEndV[c],
+                       channel + " balanced longest end value");
+    }
+    expectSameBits(got.previousZ, expected.previousZ, what + " previous depth");
+    EXPECT_EQ(got.count, expected.count) << what;
+    EXPECT_EQ(got.balancedAt, expected.balancedAt) << what;
+    expectSameBits(got.longest, expected.longest, what + " longest stretch");
+    expectSameBits(got.longestEndDz, expected.longestEndDz, what + " longest stretch's end depth");
+    expectSameBits(got.balancedLongest, expected.balancedLongest, what + " balanced longest stretch");
+    expectSameBits(got.balancedLongestEndDz, expected.balancedLongestEndDz, what + " balanced longest end depth");
+    EXPECT_EQ(got.balancedCount, expected.balancedCount) << what;
+}
+
+// Whether a segment that a walk took `walked` vertices of a run of n into
+// ends within a whole block of the run.
+bool endsInABlock(std::size_t walked, std::size_t n) { return walked < n && walked / 8 * 8 + 8 <= n; }
+
+// How many vertices the blocks take of such a run: whole blocks, and the
+// vertices of the block where the segment ends before the one that ends it;
+// a run's last few are left.
+std::size_t takenInBlocks(std::size_t walked, std::size_t n) {
+    return endsInABlock(walked, n) ? walked : walked / 8 * 8;
 }
 
 template <typename T>
@@ -248,7 +286,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const dou
         const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
         const double originV = trial % 5 == 0 ? 1.0 : unit(rng);
         const double band = trial % 7 == 0 ? 1e-9 : 0.2 * unit(rng) + 1e-6;
-        const CentredFrame frame{slopeFrame(originZ, originV, band), 0.1 * band};
+        const CentredFrame frame{{slopeFrame(originZ, originV, band)}, 0.1 * band};
         // A falling input in steps and ramps, flat for long stretches at
         // times (plateaus, where segments balance, and whose ends they keep).
         std::vector<float> z(n);
@@ -269,18 +307,15 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const dou
         // An open segment, as after its first vertex, with something already
         // summed and balanced.
         const float firstZ = static_cast<float>(originZ + 1e-3);
-        const VertexSlopes first = vertexSlopes(firstZ, originV, frame.slopes);
-        const CentredRun start{first.bottom, first.top, 2e-3 * originV, firstZ, originV, 7, 1e-3,
-                               1e-3, originV, 3, first.bottom, first.top, 1e-3, 2, 1e-3, 1e-3, originV};
+        const VertexSlopes first = vertexSlopes(firstZ, originV, frame.slopes[0]);
+        const CentredRun start{{first.bottom}, {first.top}, {2e-3 * originV}, firstZ, {originV}, 7, 1e-3,
+                               1e-3, {originV}, 3, {first.bottom}, {first.top}, {1e-3}, 2, 1e-3, 1e-3, {originV}};
         for (int variant = 0; variant < 3; ++variant) {
             const bool withCounts = variant != 0, ownBands = variant == 2;
             const std::vector<CentredRun> walk =
                 centredWalk(z, v, ownBands ? &bands : nullptr, withCounts ? &counts : nullptr, frame, start);
-            // Whole blocks, and the vertices of the block where the segment
-            // ends before the one that ends it; a run's last few are left.
-            const std::size_t walked = walk.size() - 1, wholeBlocks = walked / 8 * 8;
-            const bool endsInBlock = walked < n && wholeBlocks + 8 <= n;
-            const std::size_t taken = endsInBlock ? walked : wholeBlocks;
+            const std::size_t walked = walk.size() - 1, taken = takenInBlocks(walked, n);
+            const bool endsInBlock = endsInABlock(walked, n);
             const CentredRun& expected = walk[taken];
             CentredRun got = start;
             const std::size_t took = blocks(z.data(), v.data(), ownBands ? bands.data() : nullptr,
@@ -288,24 +323,7 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const dou
             const std::string what =
                 std::string(name) + " trial " + std::to_string(trial) + (ownBands ? ", own bands" : "");
             ASSERT_EQ(took, taken) << what;
-            expectSameBits(got.lo, expected.lo, what + " lo");
-            expectSameBits(got.hi, expected.hi, what + " hi");
-            expectSameBits(got.twiceIntegral, expected.twiceIntegral, what + " integral");
-            expectSameBits(got.previousZ, expected.previousZ, what + " previous depth");
-            expectSameBits(got.previousV, expected.previousV, what + " previous value");
-            EXPECT_EQ(got.count, expected.count) << what;
-            ASSERT_EQ(got.balancedAt, expected.balancedAt) << what;
-            expectSameBits(got.balancedLo, expected.balancedLo, what + " balanced lo");
-            expectSameBits(got.balancedHi, expected.balancedHi, what + " balanced hi");
-            expectSameBits(got.balancedIntegral, expected.balancedIntegral, what + " balanced integral");
-            expectSameBits(got.longest, expected.longest, what + " longest stretch");
-            expectSameBits(got.longestEndDz, expected.longestEndDz, what + " longest stretch's end depth");
-            expectSameBits(got.longestEndV, expected.longestEndV, what + " longest stretch's end value");
-            expectSameBits(got.balancedLongest, expected.balancedLongest, what + " balanced longest stretch");
-            expectSameBits(got.balancedLongestEndDz, expected.balancedLongestEndDz,
-                           what + " balanced longest end depth");
-            expectSameBits(got.balancedLongestEndV, expected.balancedLongestEndV, what + " balanced longest end value");
-            EXPECT_EQ(got.balancedCount, expected.balancedCount) << what;
+            expectSameRun(got, expected, what);
             if (::testing::Test::HasFailure()) return;
             if (withCounts && !ownBands) {
                 (endsInBlock ? ended : whole) += 1;
@@ -334,6 +352,97 @@ TEST(SlopeBlocks, Avx2CentredBlocksTakeWhatTheWalkWould) {
     if (!avx2.centredFloats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
     checkCentredVariant(avx2.centredFloats, "AVX2, float values");
     checkCentredVariant(avx2.centredDoubles, "AVX2, double values");
+}
+
+// The same for RGB: each channel falls in its own steps and ramps (a
+// coloured input), flat in every channel across the plateaus.
+template <typename T>
+void checkCentredRgbVariant(std::size_t (*blocks)(const float*, const T*, const std::uint32_t*, std::size_t,
+                                                  const CentredFrameOf<3>&, CentredRunOf<3>&),
+                            const char* name) {
+    std::mt19937_64 rng(43);
+    std::uniform_real_distribution<double> unit(0.0, 1.0);
+    int ended = 0, endedPartWay = 0, whole = 0, balancedInBlocks = 0;
+    for (int trial = 0; trial < 3000; ++trial) {
+        const std::size_t n = rng() % 120;
+        const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
+        const double band = trial % 7 == 0 ? 1e-9 : 0.2 * unit(rng) + 1e-6;
+        CentredFrameOf<3> frame{};
+        frame.margin = 0.1 * band;
+        double value[3];
+        for (int c = 0; c < 3; ++c) {
+            value[c] = trial % 5 == 0 ? 1.0 : 0.5 + 0.5 * unit(rng);
+            frame.slopes[c] = slopeFrame(originZ, value[c], band);
+        }
+        std::vector<float> z(n);
+        std::vector<T> v(3 * n);
+        std::vector<std::uint32_t> counts(n);
+        double depth = originZ + 1e-3 * unit(rng);
+        const double fall = trial % 3 == 0 ? 0.002 : 0.05;
+        for (std::size_t i = 0; i < n; ++i) {
+            if (rng() % 3 != 0) depth += 0.05 * unit(rng);
+            const bool plateau = trial % 2 == 0 && rng() % 23 == 0;
+            if (plateau) depth += 0.5 + unit(rng);
+            z[i] = static_cast<float>(depth);
+            for (std::size_t c = 0; c < 3; ++c) {
+                if (!plateau && rng() % 4 != 0) value[c] = std::max(0.0, value[c] - fall * (c + 1) * 0.5 * unit(rng));
+                v[3 * i + c] = static_cast<T>(value[c]);
+            }
+            counts[i] = static_cast<std::uint32_t>(rng() % 5 == 0 ? 0xffffffffu : rng() % 1000);
+        }
+        // An open segment, as after its first vertex, with something already
+        // summed and balanced.
+        const float firstZ = static_cast<float>(originZ + 1e-3);
+        CentredRunOf<3> start{};
+        for (int c = 0; c < 3; ++c) {
+            const double originV = frame.slopes[c].originV;
+            const VertexSlopes first = vertexSlopes(firstZ, originV, frame.slopes[c]);
+            start.lo[c] = start.balancedLo[c] = first.bottom;
+            start.hi[c] = start.balancedHi[c] = first.top;
+            start.twiceIntegral[c] = 2e-3 * originV;
+            start.balancedIntegral[c] = 1e-3;
+            start.previousV[c] = start.longestEndV[c] = start.balancedLongestEndV[c] = originV;
+        }
+        start.previousZ = firstZ;
+        start.count = 7;
+        start.longest = start.longestEndDz = start.balancedLongest = start.balancedLongestEndDz = 1e-3;
+        start.balancedAt = 3;
+        start.balancedCount = 2;
+        for (bool withCounts : {false, true}) {
+            const std::vector<CentredRunOf<3>> walk =
+                centredWalk(z, v, nullptr, withCounts ? &counts : nullptr, frame, start);
+            const std::size_t walked = walk.size() - 1, taken = takenInBlocks(walked, n);
+            const bool endsInBlock = endsInABlock(walked, n);
+            CentredRunOf<3> got = start;
+            const std::size_t took = blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, got);
+            const std::string what = std::string(name) + " trial " + std::to_string(trial);
+            ASSERT_EQ(took, taken) << what;
+            expectSameRun(got, walk[taken], what);
+            if (::testing::Test::HasFailure()) return;
+            if (withCounts) {
+                (endsInBlock ? ended : whole) += 1;
+                if (endsInBlock && walked % 8 != 0) ++endedPartWay;
+                if (walk[taken].balancedAt != start.balancedAt) ++balancedInBlocks;
+            }
+        }
+    }
+    EXPECT_GT(ended, 300) << name;
+    EXPECT_GT(endedPartWay, 300) << name;
+    EXPECT_GT(whole, 300) << name;
+    EXPECT_GT(balancedInBlocks, 300) << name;
+}
+
+TEST(SlopeBlocks, BaselineCentredRgbBlocksTakeWhatTheWalkWould) {
+    const SlopeBlockVariants baseline = baselineSlopeBlocks();
+    checkCentredRgbVariant(baseline.centredRgbFloats, "baseline RGB, float values");
+    checkCentredRgbVariant(baseline.centredRgbDoubles, "baseline RGB, double values");
+}
+
+TEST(SlopeBlocks, Avx2CentredRgbBlocksTakeWhatTheWalkWould) {
+    const SlopeBlockVariants avx2 = avx2SlopeBlocks();
+    if (!avx2.centredRgbFloats) GTEST_SKIP() << "built without the AVX2 variant, or the processor lacks AVX2";
+    checkCentredRgbVariant(avx2.centredRgbFloats, "AVX2 RGB, float values");
+    checkCentredRgbVariant(avx2.centredRgbDoubles, "AVX2 RGB, double values");
 }
 
 TEST(SlopeBlocks, FastInverseIsCloseToTheQuotient) {

@@ -180,7 +180,7 @@ public:
     // the origin, with values v[c]: twice its integral (the trapezoid from
     // the previous vertex), its last vertex, and its longest stretch between
     // vertices (the first of equals). The walks of takeCentredVertex() and
-    // the centred blocks do the same for one channel, in that order.
+    // the centred blocks do the same, in that order.
     template <int C, typename T>
     static void advanceInput(float z, double dz, const T* v, double& previousZ, LongestStretch& longest,
                              double* twiceIntegral, double* previousV) {
@@ -209,10 +209,10 @@ public:
     std::size_t extendRun(const float* z, const T* v, const std::uint32_t* counts, std::size_t n, double band) {
         if constexpr (C == 1 && !Centred)
             if (band > 0.0) return extendRunBySlopes<withCounts>(z, v, counts, n, band);
-        if constexpr (C == 1 && Centred)
-            if (band > 0.0) return extendCentredRunBySlopes<withCounts>(z, v, counts, n, band);
-        if constexpr (C == 3)
-            if (band > 0.0) return extendRgbRunBySlopes<withCounts, Centred>(z, v, counts, n, band);
+        if constexpr (Centred)
+            if (band > 0.0) return extendCentredRunBySlopes<C, withCounts>(z, v, counts, n, band);
+        if constexpr (C == 3 && !Centred)
+            if (band > 0.0) return extendRgbRunBySlopes<withCounts>(z, v, counts, n, band);
         SlopeWindow w[C];
         Double2 origin[C];
         forEachChannel<C>([&](int c) {
@@ -343,52 +343,84 @@ public:
                static_cast<double>(z[n - 1]) - originZ_ <= detail::kMostFastDepth;
     }
 
-    // extendRun() for one channel, centred, with a band > 0: the window as
-    // two slopes, each vertex's bounds as vertexSlopes() makes them (as
-    // extendRunBySlopes() takes them one by one), and whether the segment can
-    // be balanced ending at each vertex worked out in slopes too, with the
-    // vertex's 1 / dz instead of the divisions of balanced(): the same test
+    // extendRun() centred, with a band > 0, for one channel or RGB: each
+    // channel's window as two slopes, each vertex's bounds as vertexSlopes()
+    // makes them (one 1 / dz for the channels), and whether the segment can
+    // be balanced ending at each vertex worked out in slopes too, with that
+    // 1 / dz instead of the divisions of balanced(): the same test
     // (takeCentredVertex()). Blocks of eight go at once where they can
-    // (takeCentredBlocks(), the same arithmetic), the run's last few vertices
-    // one by one. Each vertex's band is `band`, or bands[i] (grey RGB). The
-    // run's last balanced vertex is kept by its index, and the run ends as
-    // endCentredRun() says: the segment may close at that vertex within the
-    // run, the count returned then ending there.
+    // (takeCentredBlocks() and takeCentredRgbBlocks(), the same arithmetic),
+    // the run's last few vertices one by one. Each vertex's band is `band`,
+    // or bands[i] (grey RGB, one channel). The run's last balanced vertex is
+    // kept by its index, and the run ends as endCentredRun() says: the
+    // segment may close at that vertex within the run, the count returned
+    // then ending there.
     // Not inlined: extendOne() would otherwise carry all of it into the
     // greedy rule's vertex-by-vertex push().
-    template <bool withCounts, typename T>
+    template <int C, bool withCounts, typename T>
     [[gnu::noinline]] std::size_t extendCentredRunBySlopes(const float* z, const T* v, const std::uint32_t* counts,
                                                            std::size_t n, double band,
                                                            const double* bands = nullptr) {
         if (n == 0) return 0;
-        const detail::CentredFrame frame{detail::slopeFrame(originZ_, originV_[0], band), kBalance * band_};
-        detail::CentredRun r{window_[0].lo(), window_[0].hi(), twiceIntegral_[0], lastZ_, inputV_[0], 0,
-                             longest_.length, longest_.endDz, longest_.endV[0], detail::kNotBalanced, 0.0, 0.0, 0.0,
-                             0, 0.0, 0.0, 0.0};
+        constexpr std::size_t nc = C;
+        detail::CentredFrameOf<C> frame;
+        detail::CentredRunOf<C> r{};
+        for (int c = 0; c < C; ++c) {
+            frame.slopes[c] = detail::slopeFrame(originZ_, originV_[c], band);
+            r.lo[c] = window_[c].lo();
+            r.hi[c] = window_[c].hi();
+            r.twiceIntegral[c] = twiceIntegral_[c];
+            r.previousV[c] = inputV_[c];
+            r.longestEndV[c] = longest_.endV[c];
+        }
+        frame.margin = kBalance * band_;
+        r.previousZ = lastZ_;
+        r.count = 0;
+        r.longest = longest_.length;
+        r.longestEndDz = longest_.endDz;
+        r.balancedAt = detail::kNotBalanced;
+        const std::uint32_t* vertexCounts = withCounts ? counts : nullptr;
         std::size_t i = 0;
-        if (blocksFit(z, n)) i = detail::takeCentredBlocks(z, v, bands, withCounts ? counts : nullptr, n, frame, r);
+        if (blocksFit(z, n)) {
+            if constexpr (C == 1)
+                i = detail::takeCentredBlocks(z, v, bands, vertexCounts, n, frame, r);
+            else
+                i = detail::takeCentredRgbBlocks(z, v, vertexCounts, n, frame, r);
+        }
         if (bands) {
             // The margin stays the run's: balanced() measures it from band_ too.
             for (; i < n; ++i) {
-                const detail::CentredFrame own{detail::withBand(frame.slopes, bands[i]), frame.margin};
-                if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, own, r)) break;
+                const detail::CentredFrameOf<C> own{{detail::withBand(frame.slopes[0], bands[i])}, frame.margin};
+                if (!detail::takeCentredVertex(z[i], v + i * nc, withCounts ? counts[i] : 0u, i, own, r)) break;
             }
         } else {
             for (; i < n; ++i)
-                if (!detail::takeCentredVertex(z[i], v[i], withCounts ? counts[i] : 0u, i, frame, r)) break;
+                if (!detail::takeCentredVertex(z[i], v + i * nc, withCounts ? counts[i] : 0u, i, frame, r)) break;
         }
-        CentredState<1> atBalance, after;
-        if (r.balancedAt != detail::kNotBalanced)
-            atBalance = {{r.balancedLo},
-                         {r.balancedHi},
-                         {r.balancedIntegral},
-                         {static_cast<double>(v[r.balancedAt])},
-                         {r.balancedLongest, r.balancedLongestEndDz, {r.balancedLongestEndV}},
-                         r.balancedCount};
-        after = {{r.lo}, {r.hi}, {r.twiceIntegral}, {r.previousV}, {r.longest, r.longestEndDz, {r.longestEndV}},
-                 r.count};
-        return endCentredRun<1>(z, v, withCounts ? counts : nullptr, n, i, band, bands, r.balancedAt, atBalance,
-                                after);
+        CentredState<C> atBalance, after;
+        if (r.balancedAt != detail::kNotBalanced) {
+            for (int c = 0; c < C; ++c) {
+                atBalance.lo[c] = r.balancedLo[c];
+                atBalance.hi[c] = r.balancedHi[c];
+                atBalance.twiceIntegral[c] = r.balancedIntegral[c];
+                atBalance.inputV[c] = static_cast<double>(v[r.balancedAt * nc + static_cast<std::size_t>(c)]);
+                atBalance.longest.endV[c] = r.balancedLongestEndV[c];
+            }
+            atBalance.longest.length = r.balancedLongest;
+            atBalance.longest.endDz = r.balancedLongestEndDz;
+            atBalance.count = r.balancedCount;
+        }
+        for (int c = 0; c < C; ++c) {
+            after.lo[c] = r.lo[c];
+            after.hi[c] = r.hi[c];
+            after.twiceIntegral[c] = r.twiceIntegral[c];
+            after.inputV[c] = r.previousV[c];
+            after.longest.endV[c] = r.longestEndV[c];
+        }
+        after.longest.length = r.longest;
+        after.longest.endDz = r.longestEndDz;
+        after.count = r.count;
+        return endCentredRun<C>(z, v, vertexCounts, n, i, band, bands, r.balancedAt, atBalance, after);
     }
 
     // A centred segment's state after a vertex, in slopes: each channel's
@@ -445,39 +477,25 @@ public:
         return i;
     }
 
-    // extendRun() for RGB with a band > 0: each channel's window as two
-    // slopes and each vertex's bounds as vertexSlopes() makes them, with one
-    // 1 / dz for the three channels; the segment takes a vertex while every
-    // channel's window stays feasible. Centred, the run's last vertex at
-    // which every channel can be balanced (balancedInSlopes(), the test of
-    // balanced() without its divisions) is kept by its index, and the run
-    // ends as a one-channel centred run does (endCentredRun()).
-    template <bool withCounts, bool Centred, typename T>
+    // extendRun() for RGB, greedy, with a band > 0: each channel's window as
+    // two slopes and each vertex's bounds as vertexSlopes() makes them, with
+    // one 1 / dz for the three channels; the segment takes a vertex while
+    // every channel's window stays feasible. Whole blocks of eight go first
+    // (takeRgbSlopeBlocks(), the same windows bit for bit).
+    template <bool withCounts, typename T>
     std::size_t extendRgbRunBySlopes(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
                                      double band) {
         constexpr int C = 3;
         detail::SlopeFrame frame[C];
-        double lo[C], hi[C], twiceIntegral[C], previousV[C];
+        double lo[C], hi[C];
         forEachChannel<C>([&](int c) {
             frame[c] = detail::slopeFrame(originZ_, originV_[c], band);
             lo[c] = window_[c].lo();
             hi[c] = window_[c].hi();
-            if constexpr (Centred) {
-                twiceIntegral[c] = twiceIntegral_[c];
-                previousV[c] = inputV_[c];
-            }
         });
-        const double margin = kBalance * band_;
-        double previousZ = lastZ_;
-        LongestStretch longest = longest_;
         std::uint64_t count = 0;
-        // Centred: the run's last balanced vertex, kept by its index, and
-        // the segment's state there (endCentredRun()).
-        std::size_t balancedAt = detail::kNotBalanced;
-        CentredState<C> atBalance;
         std::size_t i = 0;
-        // Greedy, whole blocks of eight first (the same windows bit for bit).
-        if (!Centred && blocksFit(z, n))
+        if (blocksFit(z, n))
             i = detail::takeRgbSlopeBlocks(z, v, withCounts ? counts : nullptr, n, frame, lo, hi, count);
         for (; i < n; ++i) {
             const T* values = v + i * C;
@@ -495,40 +513,6 @@ public:
             std::copy(nextLo, nextLo + C, lo);
             std::copy(nextHi, nextHi + C, hi);
             if constexpr (withCounts) count += counts[i];
-            if constexpr (Centred) {
-                advanceInput<C>(z[i], dz, values, previousZ, longest, twiceIntegral, previousV);
-                const bool plateau = detail::isPlateau(longest.length, dz);
-                bool isBalanced = true;
-                forEachChannel<C>([&](int c) {
-                    isBalanced &= detail::balancedInSlopes(lo[c], hi[c], twiceIntegral[c], previousV[c], inverse,
-                                                           plateau, longest.endDz, longest.endV[c], frame[c].originV,
-                                                           margin);
-                });
-                if (isBalanced) {
-                    balancedAt = i;
-                    forEachChannel<C>([&](int c) {
-                        atBalance.lo[c] = lo[c];
-                        atBalance.hi[c] = hi[c];
-                        atBalance.twiceIntegral[c] = twiceIntegral[c];
-                        atBalance.inputV[c] = previousV[c];
-                    });
-                    atBalance.longest = longest;
-                    atBalance.count = count;
-                }
-            }
-        }
-        if constexpr (Centred) {
-            CentredState<C> after;
-            forEachChannel<C>([&](int c) {
-                after.lo[c] = lo[c];
-                after.hi[c] = hi[c];
-                after.twiceIntegral[c] = twiceIntegral[c];
-                after.inputV[c] = previousV[c];
-            });
-            after.longest = longest;
-            after.count = count;
-            return endCentredRun<C>(z, v, withCounts ? counts : nullptr, n, i, band, nullptr, balancedAt, atBalance,
-                                    after);
         }
         forEachChannel<C>([&](int c) { window_[c] = SlopeWindow::ofSlopes(lo[c], hi[c], frame[c].originV); });
         segmentCount_ += count;
@@ -545,8 +529,8 @@ public:
         if (!open_) return 0;
         // The run's own band (band_) is not read where each vertex has one.
         if (centred_)
-            return counts ? extendCentredRunBySlopes<true>(z, mids, counts, n, band_, bands)
-                          : extendCentredRunBySlopes<false>(z, mids, counts, n, band_, bands);
+            return counts ? extendCentredRunBySlopes<1, true>(z, mids, counts, n, band_, bands)
+                          : extendCentredRunBySlopes<1, false>(z, mids, counts, n, band_, bands);
         return counts ? extendRunBySlopes<true>(z, mids, counts, n, band_, bands)
                       : extendRunBySlopes<false>(z, mids, counts, n, band_, bands);
     }

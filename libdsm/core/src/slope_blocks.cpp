@@ -9,15 +9,16 @@ SlopeBlockVariants avx2SlopeBlocksCompiled();  // slope_blocks_avx2.cpp
 #endif
 
 SlopeBlockVariants baselineSlopeBlocks() {
-    return {&slopeBlocks<float>,   &slopeBlocks<double>,    &centredBlocks<float>,
-            &centredBlocks<double>, &rgbSlopeBlocks<float>, &rgbSlopeBlocks<double>};
+    return {&slopeBlocks<float>,    &slopeBlocks<double>,    &centredBlocks<float>,
+            &centredBlocks<double>,  &rgbSlopeBlocks<float>,  &rgbSlopeBlocks<double>,
+            &centredRgbBlocks<float>, &centredRgbBlocks<double>};
 }
 
 SlopeBlockVariants avx2SlopeBlocks() {
 #ifdef DSM_SLOPE_BLOCKS_AVX2
     if (__builtin_cpu_supports("avx2")) return avx2SlopeBlocksCompiled();
 #endif
-    return {nullptr, nullptr, nullptr, nullptr, nullptr, nullptr};
+    return {nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr};
 }
 
 namespace {
@@ -60,6 +61,16 @@ std::size_t takeCentredBlocks(const float* z, const float* v, const double* band
 std::size_t takeCentredBlocks(const float* z, const double* v, const double* bands, const std::uint32_t* counts,
                               std::size_t n, const CentredFrame& frame, CentredRun& run) {
     return chosenSlopeBlocks().centredDoubles(z, v, bands, counts, n, frame, run);
+}
+
+std::size_t takeCentredRgbBlocks(const float* z, const float* v, const std::uint32_t* counts, std::size_t n,
+                                 const CentredFrameOf<3>& frame, CentredRunOf<3>& run) {
+    return chosenSlopeBlocks().centredRgbFloats(z, v, counts, n, frame, run);
+}
+
+std::size_t takeCentredRgbBlocks(const float* z, const double* v, const std::uint32_t* counts, std::size_t n,
+                                 const CentredFrameOf<3>& frame, CentredRunOf<3>& run) {
+    return chosenSlopeBlocks().centredRgbDoubles(z, v, counts, n, frame, run);
 }
 
 }  // namespace dsm::detail

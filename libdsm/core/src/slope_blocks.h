@@ -116,25 +116,28 @@ DSM_TESTED_INTERNAL std::size_t takeRgbSlopeBlocks(const float* z, const double*
                                                    std::size_t n, const SlopeFrame* frames, double* lo, double* hi,
                                                    std::uint64_t& count);
 
-// A centred segment of one channel along a run (the compressor's
-// extendCentredRunBySlopes()): its window [lo, hi], twice the input's
-// integral from the origin (the trapezoids' halves left out), the last
-// vertex taken (depth and value), the counts taken, the longest stretch
+// A centred segment of C channels along a run (the compressor's
+// extendCentredRunBySlopes()): each channel's window [lo, hi], twice the
+// input's integral from the origin (the trapezoids' halves left out), the
+// last vertex taken (depth and values), the counts taken, the longest stretch
 // between input vertices so far (the first of equals: its length, and its
-// end's depth beyond the origin and value), and the last vertex of the run
-// at which the segment can be balanced, with the window, integral, counts
-// and longest stretch there (balancedAt is kNotBalanced while there is none).
-struct CentredRun {
-    double lo, hi;
-    double twiceIntegral;
-    double previousZ, previousV;
+// end's depth beyond the origin and values), and the last vertex of the run
+// at which every channel of the segment can be balanced, with the windows,
+// integrals, counts and longest stretch there (balancedAt is kNotBalanced
+// while there is none).
+template <int C>
+struct CentredRunOf {
+    double lo[C], hi[C];
+    double twiceIntegral[C];
+    double previousZ, previousV[C];
     std::uint64_t count;
-    double longest, longestEndDz, longestEndV;
+    double longest, longestEndDz, longestEndV[C];
     std::size_t balancedAt;
-    double balancedLo, balancedHi, balancedIntegral;
+    double balancedLo[C], balancedHi[C], balancedIntegral[C];
     std::uint64_t balancedCount;
-    double balancedLongest, balancedLongestEndDz, balancedLongestEndV;
+    double balancedLongest, balancedLongestEndDz, balancedLongestEndV[C];
 };
+using CentredRun = CentredRunOf<1>;
 inline constexpr std::size_t kNotBalanced = ~std::size_t{0};
 
 // A stretch between input vertices that makes up at least this share of a
@@ -146,12 +149,15 @@ inline constexpr double kPlateauShare = 0.5;
 // Whether a longest stretch of this length is a plateau of a segment dz deep.
 static inline bool isPlateau(double longest, double dz) { return longest >= kPlateauShare * dz; }
 
-// What a centred segment tests at each vertex: the frame, and the margin by
-// which a balanced line may miss the input's mean and its last value.
-struct CentredFrame {
-    SlopeFrame slopes;
+// What a centred segment of C channels tests at each vertex: each channel's
+// frame (all at one origin depth), and the margin by which a balanced line
+// may miss the input's mean and its last value.
+template <int C>
+struct CentredFrameOf {
+    SlopeFrame slopes[C];
     double margin;
 };
+using CentredFrame = CentredFrameOf<1>;
 
 // Whether a centred segment of one channel can be balanced ending at its
 // last vertex (value, 1 / dz beyond the origin given): of the feasible
@@ -185,46 +191,62 @@ struct CentredFrame {
 }
 
 // One step of the compressor's centred walk: takes vertex `index` of a run
-// (depth z, value v, count) into the run state when the window narrowed by
-// its bounds stays feasible, and tests whether the segment can be balanced
-// ending there (balanced(): of the feasible slopes, one within 2 margin / dz
+// (depth z, values[c] of each channel, count) into the run state when every
+// channel's window narrowed by its bounds stays feasible (one 1 / dz for the
+// channels), and tests whether the segment can be balanced ending there, in
+// every channel (balanced(): of the feasible slopes, one within 2 margin / dz
 // of the balanced slope (twiceIntegral - 2 origin dz) / dz^2 whose end is
 // within margin of the input, and, when the longest stretch is a plateau,
 // within margin of the input at that stretch's end). Returns false, the
-// state untouched, when the vertex leaves no feasible slope.
-template <typename T>
-static inline bool takeCentredVertex(float z, T v, std::uint64_t count, std::size_t index, const CentredFrame& f,
-                                     CentredRun& r) {
-    const double origin = f.slopes.originV, margin = f.margin;
+// state untouched, when the vertex leaves some channel no feasible slope.
+template <int C, typename T>
+static inline bool takeCentredVertex(float z, const T* values, std::uint64_t count, std::size_t index,
+                                     const CentredFrameOf<C>& f, CentredRunOf<C>& r) {
+    const float originZ = f.slopes[0].originZ;
     // vertexSlopes(), keeping its 1 / dz for the balance below.
-    const double dz = static_cast<double>(z) - static_cast<double>(f.slopes.originZ);
-    const double inverse = depthInverse(z, f.slopes.originZ, dz);
-    const VertexSlopes s = slopesScaledBy(inverse, dz, v, f.slopes);
-    const double nextHi = s.top < r.hi ? s.top : r.hi, nextLo = r.lo < s.bottom ? s.bottom : r.lo;
-    if (!feasibleWindow(nextLo, nextHi, origin, dz)) return false;
-    r.hi = nextHi;
-    r.lo = nextLo;
+    const double dz = static_cast<double>(z) - static_cast<double>(originZ);
+    const double inverse = depthInverse(z, originZ, dz);
+    double nextLo[C], nextHi[C];
+    bool feasible = true;
+    for (int c = 0; c < C; ++c) {
+        const VertexSlopes s = slopesScaledBy(inverse, dz, values[c], f.slopes[c]);
+        nextHi[c] = s.top < r.hi[c] ? s.top : r.hi[c];
+        nextLo[c] = r.lo[c] < s.bottom ? s.bottom : r.lo[c];
+        feasible &= feasibleWindow(nextLo[c], nextHi[c], f.slopes[c].originV, dz);
+    }
+    if (!feasible) return false;
     r.count += count;
-    const double value = static_cast<double>(v);
     const double stretch = static_cast<double>(z) - r.previousZ;
-    r.twiceIntegral += stretch * (r.previousV + value);
-    if (stretch > r.longest) {
+    const bool longer = stretch > r.longest;
+    if (longer) {
         r.longest = stretch;
         r.longestEndDz = dz;
-        r.longestEndV = value;
     }
     r.previousZ = z;
-    r.previousV = value;
-    if (balancedInSlopes(r.lo, r.hi, r.twiceIntegral, value, inverse, isPlateau(r.longest, dz), r.longestEndDz,
-                         r.longestEndV, origin, margin)) {
+    for (int c = 0; c < C; ++c) {
+        const double value = static_cast<double>(values[c]);
+        r.hi[c] = nextHi[c];
+        r.lo[c] = nextLo[c];
+        r.twiceIntegral[c] += stretch * (r.previousV[c] + value);
+        r.previousV[c] = value;
+        if (longer) r.longestEndV[c] = value;
+    }
+    const bool plateau = isPlateau(r.longest, dz);
+    bool balanced = true;
+    for (int c = 0; c < C; ++c)
+        balanced &= balancedInSlopes(r.lo[c], r.hi[c], r.twiceIntegral[c], r.previousV[c], inverse, plateau,
+                                     r.longestEndDz, r.longestEndV[c], f.slopes[c].originV, f.margin);
+    if (balanced) {
         r.balancedAt = index;
-        r.balancedLo = r.lo;
-        r.balancedHi = r.hi;
-        r.balancedIntegral = r.twiceIntegral;
+        for (int c = 0; c < C; ++c) {
+            r.balancedLo[c] = r.lo[c];
+            r.balancedHi[c] = r.hi[c];
+            r.balancedIntegral[c] = r.twiceIntegral[c];
+            r.balancedLongestEndV[c] = r.longestEndV[c];
+        }
         r.balancedCount = r.count;
         r.balancedLongest = r.longest;
         r.balancedLongestEndDz = r.longestEndDz;
-        r.balancedLongestEndV = r.longestEndV;
     }
     return true;
 }
@@ -248,10 +270,21 @@ DSM_TESTED_INTERNAL std::size_t takeCentredBlocks(const float* z, const double* 
                                                   const std::uint32_t* counts, std::size_t n,
                                                   const CentredFrame& frame, CentredRun& run);
 
-// takeSlopeBlocks(), takeCentredBlocks() and takeRgbSlopeBlocks() on the
-// baseline instruction set, and on AVX2 (null where the library was built
-// without it, or the processor lacks it): for the tests, which check that the
-// two agree bit for bit.
+// takeCentredBlocks() for RGB with one band for the run (values[i * 3 + c]),
+// as takeCentredVertex<3>() would take the vertices one by one: a vertex is
+// taken while every channel's window stays feasible, and is balanced where
+// every channel is. Same preconditions and result.
+DSM_TESTED_INTERNAL std::size_t takeCentredRgbBlocks(const float* z, const float* v, const std::uint32_t* counts,
+                                                     std::size_t n, const CentredFrameOf<3>& frame,
+                                                     CentredRunOf<3>& run);
+DSM_TESTED_INTERNAL std::size_t takeCentredRgbBlocks(const float* z, const double* v, const std::uint32_t* counts,
+                                                     std::size_t n, const CentredFrameOf<3>& frame,
+                                                     CentredRunOf<3>& run);
+
+// takeSlopeBlocks(), takeCentredBlocks(), takeRgbSlopeBlocks() and
+// takeCentredRgbBlocks() on the baseline instruction set, and on AVX2 (null
+// where the library was built without it, or the processor lacks it): for the
+// tests, which check that the two agree bit for bit.
 using SlopeBlocksOfFloats = std::size_t (*)(const float*, const float*, const double*, const std::uint32_t*,
                                             std::size_t, const SlopeFrame&, double&, double&, std::uint64_t&);
 using SlopeBlocksOfDoubles = std::size_t (*)(const float*, const double*, const double*, const std::uint32_t*,
@@ -264,6 +297,10 @@ using RgbBlocksOfFloats = std::size_t (*)(const float*, const float*, const std:
                                           const SlopeFrame*, double*, double*, std::uint64_t&);
 using RgbBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
                                            const SlopeFrame*, double*, double*, std::uint64_t&);
+using CentredRgbBlocksOfFloats = std::size_t (*)(const float*, const float*, const std::uint32_t*, std::size_t,
+                                                 const CentredFrameOf<3>&, CentredRunOf<3>&);
+using CentredRgbBlocksOfDoubles = std::size_t (*)(const float*, const double*, const std::uint32_t*, std::size_t,
+                                                  const CentredFrameOf<3>&, CentredRunOf<3>&);
 struct SlopeBlockVariants {
     SlopeBlocksOfFloats floats;
     SlopeBlocksOfDoubles doubles;
@@ -271,6 +308,8 @@ struct SlopeBlockVariants {
     CentredBlocksOfDoubles centredDoubles;
     RgbBlocksOfFloats rgbFloats;
     RgbBlocksOfDoubles rgbDoubles;
+    CentredRgbBlocksOfFloats centredRgbFloats;
+    CentredRgbBlocksOfDoubles centredRgbDoubles;
 };
 DSM_TESTED_INTERNAL SlopeBlockVariants baselineSlopeBlocks();
 DSM_TESTED_INTERNAL SlopeBlockVariants avx2SlopeBlocks();

@@ -237,63 +237,80 @@ std::size_t slopeBlocksOf(const float* z, const T* v, const double* bands, const
 }
 
 // Each lane keeps its stretch (length, end depth beyond the origin, end
-// value) unless the earlier one given for it is at least as long: the first
-// of equals, as the walk keeps it.
-[[gnu::always_inline]] inline void keepLongest(Double4& length, Double4& endDz, Double4& endV,
+// values of C channels) unless the earlier one given for it is at least as
+// long: the first of equals, as the walk keeps it.
+template <int C>
+[[gnu::always_inline]] inline void keepLongest(Double4& length, Double4& endDz, Double4* endV,
                                                const Double4& earlierLength, const Double4& earlierEndDz,
-                                               const Double4& earlierEndV) {
+                                               const Double4* earlierEndV) {
     const auto keep = length > earlierLength;
     length = keep ? length : earlierLength;
     endDz = keep ? endDz : earlierEndDz;
-    endV = keep ? endV : earlierEndV;
+    for (int c = 0; c < C; ++c) endV[c] = keep ? endV[c] : earlierEndV[c];
 }
 
 // The longest stretch of each lane and the lanes before it, and of `before`
 // (the run's, ahead of the lanes), through references: one lane back, then
 // two lanes back, then the run's.
-[[gnu::always_inline]] inline void longestSoFar(Double4& length, Double4& endDz, Double4& endV, double beforeLength,
-                                                double beforeEndDz, double beforeEndV) {
+template <int C>
+[[gnu::always_inline]] inline void longestSoFar(Double4& length, Double4& endDz, Double4* endV, double beforeLength,
+                                                double beforeEndDz, const double* beforeEndV) {
     const Double4 none = {-__builtin_inf(), -__builtin_inf(), -__builtin_inf(), -__builtin_inf()}, zero = {};
+    Double4 endV1[C], endV2[C], endVBefore[C];
     const Double4 length1 = __builtin_shufflevector(none, length, 0, 4, 5, 6);
     const Double4 endDz1 = __builtin_shufflevector(zero, endDz, 0, 4, 5, 6);
-    const Double4 endV1 = __builtin_shufflevector(zero, endV, 0, 4, 5, 6);
-    keepLongest(length, endDz, endV, length1, endDz1, endV1);
+    for (int c = 0; c < C; ++c) endV1[c] = __builtin_shufflevector(zero, endV[c], 0, 4, 5, 6);
+    keepLongest<C>(length, endDz, endV, length1, endDz1, endV1);
     const Double4 length2 = __builtin_shufflevector(none, length, 0, 1, 4, 5);
     const Double4 endDz2 = __builtin_shufflevector(zero, endDz, 0, 1, 4, 5);
-    const Double4 endV2 = __builtin_shufflevector(zero, endV, 0, 1, 4, 5);
-    keepLongest(length, endDz, endV, length2, endDz2, endV2);
-    keepLongest(length, endDz, endV, Double4{beforeLength, beforeLength, beforeLength, beforeLength},
-                Double4{beforeEndDz, beforeEndDz, beforeEndDz, beforeEndDz},
-                Double4{beforeEndV, beforeEndV, beforeEndV, beforeEndV});
+    for (int c = 0; c < C; ++c) endV2[c] = __builtin_shufflevector(zero, endV[c], 0, 1, 4, 5);
+    keepLongest<C>(length, endDz, endV, length2, endDz2, endV2);
+    for (int c = 0; c < C; ++c) endVBefore[c] = Double4{beforeEndV[c], beforeEndV[c], beforeEndV[c], beforeEndV[c]};
+    keepLongest<C>(length, endDz, endV, Double4{beforeLength, beforeLength, beforeLength, beforeLength},
+                   Double4{beforeEndDz, beforeEndDz, beforeEndDz, beforeEndDz}, endVBefore);
 }
 
-// takeCentredBlocks(), a block of eight vertices at a time, in two halves of
-// four lanes. Each vertex's 1 / dz and bounds, the trapezoid it adds to the
-// integral and the balance test are worked out four lanes at once, by the
-// operations of the compressor's centred walk (compressor.cpp) in the same
-// order. The window after each vertex is the least top and the greatest
-// bottom so far, exact in any order, so it is taken across the lanes; the
-// integral is summed lane after lane, as the walk sums it (a sum's rounding
-// depends on its order). A block is taken whole when the window after it is
-// feasible at its last vertex; otherwise each lane's window is tested, and
-// the block is taken up to the first lane where it is not feasible. Each
-// vertex's band is the frame's, or bands[i] (ownBands); the margin is the
-// frame's either way.
-template <bool withCounts, bool ownBands, typename T>
+// takeCentredBlocks() and takeCentredRgbBlocks(), a block of eight vertices
+// at a time, in two halves of four lanes. Each vertex's 1 / dz and each
+// channel's bounds, the trapezoid it adds to the integral and the balance
+// test are worked out four lanes at once, by the operations of
+// takeCentredVertex() in the same order. Each channel's window after each
+// vertex is the least top and the greatest bottom so far, exact in any
+// order, so it is taken across the lanes; the integral is summed lane after
+// lane, as the walk sums it (a sum's rounding depends on its order). A
+// block is taken whole when every channel's window after it is feasible at
+// its last vertex; otherwise each lane's windows are tested, and the block is
+// taken up to the first lane where one is not feasible. A vertex is balanced
+// where every channel is. Each vertex's band is the frame's, or bands[i]
+// (ownBands, one channel); the margin is the frame's either way.
+template <int C, bool withCounts, bool ownBands, typename T>
 std::size_t centredBlocksOf(const float* z, const T* v, const double* bands, const std::uint32_t* counts,
-                            std::size_t n, const CentredFrame& f, CentredRun& run) {
-    const float originZ = f.slopes.originZ;
-    const double origin = f.slopes.originV, margin = f.margin;
-    const Offsets offsets{f.slopes.topOffset, f.slopes.bottomOffset, ownBands ? bands : nullptr};
+                            std::size_t n, const CentredFrameOf<C>& f, CentredRunOf<C>& run) {
+    static_assert(C == 1 || !ownBands, "a band for each vertex is for one channel");
+    constexpr std::size_t nc = C;
+    const float originZ = f.slopes[0].originZ;
+    const double margin = f.margin;
+    double origin[C];
+    Offsets offsets[C];
+    for (int c = 0; c < C; ++c) {
+        origin[c] = f.slopes[c].originV;
+        offsets[c] = Offsets{f.slopes[c].topOffset, f.slopes[c].bottomOffset, ownBands ? bands : nullptr};
+    }
     const Double4 zero = {};
-    CentredRun r = run;  // a local: stores through `run` could alias the input as far as the compiler knows
+    CentredRunOf<C> r = run;  // a local: stores through `run` could alias the input as far as the compiler knows
     std::size_t i = 0;
     for (; i + 8 <= n; i += 8) {
-        Double4 depth[2], value[2], inverse[2], depthBeyond[2], windowLo[2], windowHi[2], integral[2];
-        Double4 stretch[2];
-        double lo = r.lo, hi = r.hi, twiceIntegral = r.twiceIntegral, lastDz = 0.0;
-        Double4 depthBefore = {r.previousZ, r.previousZ, r.previousZ, r.previousZ};
-        Double4 valueBefore = {r.previousV, r.previousV, r.previousV, r.previousV};
+        Double4 depth[2], inverse[2], depthBeyond[2], stretch[2];
+        Double4 value[C][2], windowLo[C][2], windowHi[C][2], integral[C][2];
+        double lo[C], hi[C], lastDz = 0.0;
+        double twiceIntegral[C];
+        Double4 depthBefore = {r.previousZ, r.previousZ, r.previousZ, r.previousZ}, valueBefore[C];
+        for (int c = 0; c < C; ++c) {
+            hi[c] = r.hi[c];
+            lo[c] = r.lo[c];
+            twiceIntegral[c] = r.twiceIntegral[c];
+            valueBefore[c] = Double4{r.previousV[c], r.previousV[c], r.previousV[c], r.previousV[c]};
+        }
 #pragma GCC unroll 2
         for (std::size_t h = 0; h < 2; ++h) {
             Float4 depths;
@@ -305,44 +322,53 @@ std::size_t centredBlocksOf(const float* z, const T* v, const double* bands, con
             Double4 q;
             widen(1.0f / (depths - originZ), q);
             inverse[h] = q * (2.0 - dz * q);
-            loadValues(v + i + 4 * h, value[h]);
             lastDz = dz[3];
-            Double4 topOffset, bottomOffset;
-            offsetsOf<ownBands>(offsets, origin, i + 4 * h, topOffset, bottomOffset);
-            const Double4 tops = (value[h] + topOffset) * inverse[h];
-            const Double4 bottoms = (value[h] + bottomOffset) * inverse[h];
-            Double4 hiSoFar, loSoFar;
-            leastSoFar(tops, hiSoFar);
-            greatestSoFar(bottoms, loSoFar);
-            const Double4 hiBefore = {hi, hi, hi, hi}, loBefore = {lo, lo, lo, lo};
-            windowHi[h] = hiSoFar < hiBefore ? hiSoFar : hiBefore;  // std::min(hi, top) from vertex to vertex
-            windowLo[h] = loBefore < loSoFar ? loSoFar : loBefore;  // std::max(lo, bottom)
-            hi = windowHi[h][3];
-            lo = windowLo[h][3];
-            // (z - previousZ) * (previousV + value), then summed in order.
             const Double4 previousDepth = __builtin_shufflevector(depthBefore, depth[h], 3, 4, 5, 6);
-            const Double4 previousValue = __builtin_shufflevector(valueBefore, value[h], 3, 4, 5, 6);
             stretch[h] = depth[h] - previousDepth;
-            const Double4 trapezoid = stretch[h] * (previousValue + value[h]);
-            const double sum0 = twiceIntegral + trapezoid[0], sum1 = sum0 + trapezoid[1];
-            const double sum2 = sum1 + trapezoid[2], sum3 = sum2 + trapezoid[3];
-            integral[h] = Double4{sum0, sum1, sum2, sum3};
-            twiceIntegral = sum3;
             depthBefore = depth[h];
-            valueBefore = value[h];
+            for (int c = 0; c < C; ++c) {
+                loadChannel<C>(v + (i + 4 * h) * nc + static_cast<std::size_t>(c), value[c][h]);
+                Double4 topOffset, bottomOffset;
+                offsetsOf<ownBands>(offsets[c], origin[c], i + 4 * h, topOffset, bottomOffset);
+                const Double4 tops = (value[c][h] + topOffset) * inverse[h];
+                const Double4 bottoms = (value[c][h] + bottomOffset) * inverse[h];
+                Double4 hiSoFar, loSoFar;
+                leastSoFar(tops, hiSoFar);
+                greatestSoFar(bottoms, loSoFar);
+                const Double4 hiBefore = {hi[c], hi[c], hi[c], hi[c]}, loBefore = {lo[c], lo[c], lo[c], lo[c]};
+                windowHi[c][h] = hiSoFar < hiBefore ? hiSoFar : hiBefore;  // std::min(hi, top) vertex to vertex
+                windowLo[c][h] = loBefore < loSoFar ? loSoFar : loBefore;  // std::max(lo, bottom)
+                hi[c] = windowHi[c][h][3];
+                lo[c] = windowLo[c][h][3];
+                // (z - previousZ) * (previousV + value), then summed in order.
+                const Double4 previousValue = __builtin_shufflevector(valueBefore[c], value[c][h], 3, 4, 5, 6);
+                const Double4 trapezoid = stretch[h] * (previousValue + value[c][h]);
+                const double sum0 = twiceIntegral[c] + trapezoid[0], sum1 = sum0 + trapezoid[1];
+                const double sum2 = sum1 + trapezoid[2], sum3 = sum2 + trapezoid[3];
+                integral[c][h] = Double4{sum0, sum1, sum2, sum3};
+                twiceIntegral[c] = sum3;
+                valueBefore[c] = value[c][h];
+            }
         }
-        // The window after the block is feasible at its last vertex, so at
+        // The windows after the block are feasible at its last vertex, so at
         // every vertex of it (feasibleWindow()). Otherwise the segment ends
-        // within the block: its vertices before the first at which the window
-        // is not feasible are taken (it is never feasible again along a
-        // segment), and the rest are left.
+        // within the block: its vertices before the first at which some
+        // window is not feasible are taken (a window is never feasible again
+        // along a segment), and the rest are left.
+        bool allFeasible = true;
+        for (int c = 0; c < C; ++c) allFeasible &= feasibleWindow(lo[c], hi[c], origin[c], lastDz);
         unsigned lanesTaken = 8;
-        if (!feasibleWindow(lo, hi, origin, lastDz)) {
-            unsigned feasible = 0;
+        if (!allFeasible) {
+            unsigned feasible = 0xffu;
+            for (int c = 0; c < C; ++c) {
+                unsigned feasibleInChannel = 0;
 #pragma GCC unroll 2
-            for (std::size_t h = 0; h < 2; ++h) {
-                const Double4 top = windowHi[h], bottom = windowLo[h];
-                feasible |= laneBits((bottom <= top) & (bottom <= zero) & (top * depthBeyond[h] >= -origin)) << (4 * h);
+                for (std::size_t h = 0; h < 2; ++h) {
+                    const Double4 top = windowHi[c][h], bottom = windowLo[c][h];
+                    feasibleInChannel |=
+                        laneBits((bottom <= top) & (bottom <= zero) & (top * depthBeyond[h] >= -origin[c])) << (4 * h);
+                }
+                feasible &= feasibleInChannel;
             }
             lanesTaken = static_cast<unsigned>(__builtin_ctz(~feasible));
             if (lanesTaken == 0) break;
@@ -353,66 +379,74 @@ std::size_t centredBlocksOf(const float* z, const T* v, const double* bands, con
         // the input and, behind a plateau, within margin of the input at the
         // plateau's end. Each select is std::min's or std::max's, its
         // operands in the walk's order.
-        unsigned balanced = 0;
-        Double4 lowestOf[2], highestOf[2];
+        unsigned balanced = (1u << lanesTaken) - 1u;
+        Double4 lowestOf[C][2], highestOf[C][2];
+        for (int c = 0; c < C; ++c) {
+            unsigned balancedInChannel = 0;
 #pragma GCC unroll 2
-        for (std::size_t h = 0; h < 2; ++h) {
-            const Double4 inv = inverse[h];
-            const Double4 feasibleHi = zero < windowHi[h] ? zero : windowHi[h];
-            const Double4 aboveZero = (-origin) * inv;
-            const Double4 raised = windowLo[h] < aboveZero ? aboveZero : windowLo[h];
-            const Double4 feasibleLo = feasibleHi < raised ? feasibleHi : raised;
-            const Double4 balancedSlope = (integral[h] * inv - 2.0 * origin) * inv;
-            const Double4 spread = (2.0 * margin) * inv;
-            const Double4 belowBalance = balancedSlope - spread, aboveBalance = balancedSlope + spread;
-            const Double4 endLow = ((value[h] - margin) - origin) * inv;
-            const Double4 endHigh = ((value[h] + margin) - origin) * inv;
-            const Double4 lowestOfTwo = feasibleLo < belowBalance ? belowBalance : feasibleLo;
-            const Double4 lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
-            const Double4 highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
-            const Double4 highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
-            lowestOf[h] = lowest;
-            highestOf[h] = highest;
-            balanced |= laneBits(lowest <= highest) << (4 * h);
+            for (std::size_t h = 0; h < 2; ++h) {
+                const Double4 inv = inverse[h];
+                const Double4 feasibleHi = zero < windowHi[c][h] ? zero : windowHi[c][h];
+                const Double4 aboveZero = (-origin[c]) * inv;
+                const Double4 raised = windowLo[c][h] < aboveZero ? aboveZero : windowLo[c][h];
+                const Double4 feasibleLo = feasibleHi < raised ? feasibleHi : raised;
+                const Double4 balancedSlope = (integral[c][h] * inv - 2.0 * origin[c]) * inv;
+                const Double4 spread = (2.0 * margin) * inv;
+                const Double4 belowBalance = balancedSlope - spread, aboveBalance = balancedSlope + spread;
+                const Double4 endLow = ((value[c][h] - margin) - origin[c]) * inv;
+                const Double4 endHigh = ((value[c][h] + margin) - origin[c]) * inv;
+                const Double4 lowestOfTwo = feasibleLo < belowBalance ? belowBalance : feasibleLo;
+                const Double4 lowest = lowestOfTwo < endLow ? endLow : lowestOfTwo;
+                const Double4 highestOfTwo = aboveBalance < feasibleHi ? aboveBalance : feasibleHi;
+                const Double4 highest = endHigh < highestOfTwo ? endHigh : highestOfTwo;
+                lowestOf[c][h] = lowest;
+                highestOf[c][h] = highest;
+                balancedInChannel |= laneBits(lowest <= highest) << (4 * h);
+            }
+            balanced &= balancedInChannel;
         }
-        balanced &= (1u << lanesTaken) - 1u;
         // The longest stretch so far at each vertex, and behind a plateau
-        // the line near the input where it ends. Where no stretch of the
-        // block is longer than the run's longest, and that one is shorter
-        // than kPlateauShare of the block's first depth beyond the origin (so
-        // of every later one), it stays the run's and no vertex is behind a
-        // plateau: the usual case along a long segment.
-        double longestAfter = r.longest, longestEndDzAfter = r.longestEndDz, longestEndVAfter = r.longestEndV;
-        double longestAtBalance = r.longest, longestEndDzAtBalance = r.longestEndDz;
-        double longestEndVAtBalance = r.longestEndV;
+        // each channel's line near the input where it ends. Where no stretch
+        // of the block is longer than the run's longest, and that one is
+        // shorter than kPlateauShare of the block's first depth beyond the
+        // origin (so of every later one), it stays the run's and no vertex is
+        // behind a plateau: the usual case along a long segment.
+        double longestAfter = r.longest, longestEndDzAfter = r.longestEndDz, longestEndVAfter[C];
+        double longestAtBalance = r.longest, longestEndDzAtBalance = r.longestEndDz, longestEndVAtBalance[C];
+        for (int c = 0; c < C; ++c) longestEndVAfter[c] = longestEndVAtBalance[c] = r.longestEndV[c];
         const Double4 longer = stretch[1] > stretch[0] ? stretch[1] : stretch[0];
         if (greatestLane(longer) > r.longest || isPlateau(r.longest, depthBeyond[0][0])) {
-            Double4 longest[2], longestEndDz[2], longestEndV[2];
+            Double4 longest[2], longestEndDz[2], longestEndV[2][C];
             unsigned kept = 0;
 #pragma GCC unroll 2
             for (std::size_t h = 0; h < 2; ++h) {
                 longest[h] = stretch[h];
                 longestEndDz[h] = depthBeyond[h];
-                longestEndV[h] = value[h];
-                longestSoFar(longest[h], longestEndDz[h], longestEndV[h], longestAfter, longestEndDzAfter,
-                             longestEndVAfter);
+                for (int c = 0; c < C; ++c) longestEndV[h][c] = value[c][h];
+                longestSoFar<C>(longest[h], longestEndDz[h], longestEndV[h], longestAfter, longestEndDzAfter,
+                                longestEndVAfter);
                 longestAfter = longest[h][3];
                 longestEndDzAfter = longestEndDz[h][3];
-                longestEndVAfter = longestEndV[h][3];
+                for (int c = 0; c < C; ++c) longestEndVAfter[c] = longestEndV[h][c][3];
                 const auto plateau = longest[h] >= kPlateauShare * depthBeyond[h];
-                const Double4 atPlateauEnd = longestEndV[h] - origin;
-                const auto plateauEndKept = (lowestOf[h] * longestEndDz[h] <= atPlateauEnd + margin) &
-                                            (highestOf[h] * longestEndDz[h] >= atPlateauEnd - margin);
-                kept |= laneBits(~plateau | plateauEndKept) << (4 * h);
+                auto endsKept = plateau | ~plateau;  // every lane, then each channel's test
+                for (int c = 0; c < C; ++c) {
+                    const Double4 atPlateauEnd = longestEndV[h][c] - origin[c];
+                    endsKept &= (lowestOf[c][h] * longestEndDz[h] <= atPlateauEnd + margin) &
+                                (highestOf[c][h] * longestEndDz[h] >= atPlateauEnd - margin);
+                }
+                kept |= laneBits(~plateau | endsKept) << (4 * h);
             }
             balanced &= kept;
             const std::size_t at = 31 - static_cast<std::size_t>(__builtin_clz(balanced | 1u));
             longestAtBalance = longest[at / 4][at % 4];
             longestEndDzAtBalance = longestEndDz[at / 4][at % 4];
-            longestEndVAtBalance = longestEndV[at / 4][at % 4];
             longestAfter = longest[last / 4][last % 4];
             longestEndDzAfter = longestEndDz[last / 4][last % 4];
-            longestEndVAfter = longestEndV[last / 4][last % 4];
+            for (int c = 0; c < C; ++c) {
+                longestEndVAtBalance[c] = longestEndV[at / 4][c][at % 4];
+                longestEndVAfter[c] = longestEndV[last / 4][c][last % 4];
+            }
         }
         // The block's last balanced vertex, taken by selects: whether a block
         // has one follows the input too closely for a branch to predict.
@@ -437,21 +471,23 @@ std::size_t centredBlocksOf(const float* z, const T* v, const double* bands, con
             r.count = sums[last];
         }
         r.balancedAt = any ? i + k : r.balancedAt;
-        r.balancedLo = any ? windowLo[k / 4][k % 4] : r.balancedLo;
-        r.balancedHi = any ? windowHi[k / 4][k % 4] : r.balancedHi;
-        r.balancedIntegral = any ? integral[k / 4][k % 4] : r.balancedIntegral;
         r.balancedCount = any ? countAfter : r.balancedCount;
         r.balancedLongest = any ? longestAtBalance : r.balancedLongest;
         r.balancedLongestEndDz = any ? longestEndDzAtBalance : r.balancedLongestEndDz;
-        r.balancedLongestEndV = any ? longestEndVAtBalance : r.balancedLongestEndV;
-        r.lo = windowLo[last / 4][last % 4];
-        r.hi = windowHi[last / 4][last % 4];
-        r.twiceIntegral = integral[last / 4][last % 4];
+        for (int c = 0; c < C; ++c) {
+            r.balancedLo[c] = any ? windowLo[c][k / 4][k % 4] : r.balancedLo[c];
+            r.balancedHi[c] = any ? windowHi[c][k / 4][k % 4] : r.balancedHi[c];
+            r.balancedIntegral[c] = any ? integral[c][k / 4][k % 4] : r.balancedIntegral[c];
+            r.balancedLongestEndV[c] = any ? longestEndVAtBalance[c] : r.balancedLongestEndV[c];
+            r.lo[c] = windowLo[c][last / 4][last % 4];
+            r.hi[c] = windowHi[c][last / 4][last % 4];
+            r.twiceIntegral[c] = integral[c][last / 4][last % 4];
+            r.longestEndV[c] = longestEndVAfter[c];
+            r.previousV[c] = value[c][last / 4][last % 4];
+        }
         r.longest = longestAfter;
         r.longestEndDz = longestEndDzAfter;
-        r.longestEndV = longestEndVAfter;
         r.previousZ = depth[last / 4][last % 4];
-        r.previousV = value[last / 4][last % 4];
         if (lanesTaken < 8) {
             i += lanesTaken;
             break;
@@ -465,10 +501,17 @@ template <typename T>
 std::size_t centredBlocks(const float* z, const T* v, const double* bands, const std::uint32_t* counts,
                           std::size_t n, const CentredFrame& f, CentredRun& run) {
     if (bands)
-        return counts ? centredBlocksOf<true, true>(z, v, bands, counts, n, f, run)
-                      : centredBlocksOf<false, true>(z, v, bands, counts, n, f, run);
-    return counts ? centredBlocksOf<true, false>(z, v, bands, counts, n, f, run)
-                  : centredBlocksOf<false, false>(z, v, bands, counts, n, f, run);
+        return counts ? centredBlocksOf<1, true, true>(z, v, bands, counts, n, f, run)
+                      : centredBlocksOf<1, false, true>(z, v, bands, counts, n, f, run);
+    return counts ? centredBlocksOf<1, true, false>(z, v, bands, counts, n, f, run)
+                  : centredBlocksOf<1, false, false>(z, v, bands, counts, n, f, run);
+}
+
+template <typename T>
+std::size_t centredRgbBlocks(const float* z, const T* v, const std::uint32_t* counts, std::size_t n,
+                             const CentredFrameOf<3>& f, CentredRunOf<3>& run) {
+    return counts ? centredBlocksOf<3, true, false>(z, v, nullptr, counts, n, f, run)
+                  : centredBlocksOf<3, false, false>(z, v, nullptr, counts, n, f, run);
 }
 
 template <typename T>
