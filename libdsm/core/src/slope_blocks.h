@@ -215,22 +215,23 @@ static inline bool takeCentredVertex(float z, const T* values, std::uint64_t cou
         feasible &= feasibleWindow(nextLo[c], nextHi[c], f.slopes[c].originV, dz);
     }
     if (!feasible) return false;
-    r.count += count;
-    const double stretch = static_cast<double>(z) - r.previousZ;
-    const bool longer = stretch > r.longest;
-    if (longer) {
-        r.longest = stretch;
-        r.longestEndDz = dz;
-    }
-    r.previousZ = z;
     for (int c = 0; c < C; ++c) {
-        const double value = static_cast<double>(values[c]);
         r.hi[c] = nextHi[c];
         r.lo[c] = nextLo[c];
+    }
+    r.count += count;
+    const double stretch = static_cast<double>(z) - r.previousZ;
+    for (int c = 0; c < C; ++c) {
+        const double value = static_cast<double>(values[c]);
         r.twiceIntegral[c] += stretch * (r.previousV[c] + value);
         r.previousV[c] = value;
-        if (longer) r.longestEndV[c] = value;
     }
+    if (stretch > r.longest) {
+        r.longest = stretch;
+        r.longestEndDz = dz;
+        for (int c = 0; c < C; ++c) r.longestEndV[c] = r.previousV[c];
+    }
+    r.previousZ = z;
     const bool plateau = isPlateau(r.longest, dz);
     bool balanced = true;
     for (int c = 0; c < C; ++c)
