@@ -242,6 +242,32 @@ TEST(Compressor, GreyWithinToleranceBecomesMonochromeAndKeepsTheBound) {
     }
 }
 
+TEST(Compressor, GreyWithASpreadStaysRgbWhereTheToleranceLeavesNoRoomForIt) {
+    // A tolerance of at most 4 x 2^-25 leaves no band for the channels'
+    // mid-range once the stored values' rounding is set aside: channels one
+    // float step apart (within the tolerance) are then kept as RGB, by a run
+    // as by push() vertex by vertex, and within the tolerance.
+    const double eps = 1e-7;
+    VisibilityFunction f(3, false);
+    float v = 0.25f;
+    for (int i = 0; i < 40; ++i) {
+        const float lower = std::nextafter(v, 0.0f);
+        const float values[3] = {v, lower, v};
+        f.append(1.0f + 0.01f * static_cast<float>(i), values);
+        if (i % 3 == 2) v = std::nextafter(lower, 0.0f);
+    }
+    ASSERT_FALSE(f.isMonochrome());
+    const VisibilityFunction g = dsm::compress(f, eps);
+    EXPECT_EQ(g.channels(), 3);
+    EXPECT_LE(maxErrorAllChannels(f, g), eps + kSlack);
+    CompressorOptions options;
+    options.tolerance = eps;
+    options.channels = 3;
+    Compressor c(options);
+    ASSERT_EQ(c.pushValid(f.depths().data(), f.allValues().data(), nullptr, f.size()), f.size());
+    EXPECT_EQ(c.finish(), g);
+}
+
 TEST(Compressor, ColouredInputStaysRgb) {
     std::mt19937_64 rng(49);
     const VisibilityFunction f = grey(dsm::test::randomMonotone(rng, 40, 1, true), 0.0f);

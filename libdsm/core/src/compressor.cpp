@@ -1093,16 +1093,27 @@ struct Compressor::Impl {
     // every grey vertex (a tolerance above 2^-24; see greyTarget()).
     bool greyRuns() const { return grey && greedy.window() > 0.0; }
 
+    // What decides grey targets: the tolerance, whether it leaves no room
+    // for a spread (at most 4 kStoreRounding), and the window.
+    struct GreyLimits {
+        double tolerance;
+        bool noSpread;
+        double window;
+    };
+    GreyLimits greyLimits() const {
+        return {options.tolerance, options.tolerance < 4.0 * kStoreRounding, greedy.window()};
+    }
+
     // The channels' mid-range and its band for grey input; false when the
     // channels are too far apart to stand for one (the builder then widens
-    // to RGB).
-    bool greyTarget(const double* values, double& mid, double& band) const {
-        const double lo = std::min({values[0], values[1], values[2]});
-        const double hi = std::max({values[0], values[1], values[2]});
+    // to RGB). The limits come as a copy: stores of targets cannot then
+    // make the compiler read them again for each vertex.
+    static bool greyTarget(double r, double g, double b, GreyLimits limits, double& mid, double& band) {
+        const double lo = std::min(std::min(r, g), b), hi = std::max(std::max(r, g), b);
         const double spread = hi - lo;
-        if (spread > options.tolerance || (spread > 0.0 && options.tolerance < 4.0 * kStoreRounding)) return false;
+        if (spread > limits.tolerance || (spread > 0.0 && limits.noSpread)) return false;
         mid = 0.5 * (lo + hi);
-        band = greedy.window() - 0.5 * spread;
+        band = limits.window - 0.5 * spread;
         return true;
     }
 
@@ -1129,14 +1140,19 @@ struct Compressor::Impl {
         }
         while (i < n) {
             if (i < targets.begin || i >= targets.end) {
-                targets = {i, i};
-                for (; targets.end < n && targets.end - i < kChunk; ++targets.end) {
-                    const T* c = v + targets.end * kMaxChannels;
-                    const double values[kMaxChannels] = {static_cast<double>(c[0]), static_cast<double>(c[1]),
-                                                         static_cast<double>(c[2])};
-                    if (!greyTarget(values, greyMids[targets.end - i], greyBands[targets.end - i])) break;
+                const GreyLimits limits = greyLimits();
+                double* mids = greyMids.data();
+                double* bands = greyBands.data();
+                const std::size_t end = std::min(n, i + kChunk);
+                std::size_t k = i;
+                for (; k < end; ++k) {
+                    const T* c = v + k * kMaxChannels;
+                    if (!greyTarget(static_cast<double>(c[0]), static_cast<double>(c[1]), static_cast<double>(c[2]),
+                                    limits, mids[k - i], bands[k - i]))
+                        break;
                 }
-                if (targets.end == i) break;  // the channels disagree at i
+                targets = {i, k};
+                if (k == i) break;  // the channels disagree at i
             }
             const std::size_t from = i - targets.begin, available = targets.end - i;
             const std::size_t taken = greedy.extendGreyRun(z + i, greyMids.data() + from, greyBands.data() + from,
@@ -1152,7 +1168,7 @@ struct Compressor::Impl {
     // keeps every channel within the full window.
     void pushGrey(float z, const double* values, std::uint32_t count) {
         double mid, band;
-        if (!greyTarget(values, mid, band)) {
+        if (!greyTarget(values[0], values[1], values[2], greyLimits(), mid, band)) {
             grey = false;
             greedy.widen();
             greedy.push<3>(z, values, count, greedy.window());
