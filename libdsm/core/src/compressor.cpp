@@ -387,7 +387,7 @@ public:
             else
                 i = detail::takeCentredRgbBlocks(z, v, vertexCounts, n, frame, r);
         }
-        if (bands) {
+        if (C == 1 && bands) {
             // The margin stays the run's: balanced() measures it from band_ too.
             for (; i < n; ++i) {
                 const detail::CentredFrameOf<C> own{{detail::withBand(frame.slopes[0], bands[i])}, frame.margin};
