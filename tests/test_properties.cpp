@@ -1,6 +1,7 @@
-// Property tests (rapidcheck): the compressor's guarantee, the sweep against
-// its oracle, transmittance against direct evaluation, buildVisibility's
-// light-centre bound, and the cursor against evaluate(), on random input.
+// Property tests (rapidcheck): the compressor's guarantee (greedy and
+// centred), the sweep against its oracle, transmittance against direct
+// evaluation, buildVisibility's light-centre bound, and the cursor against
+// evaluate(), on random input.
 #include <dsm/dsm.h>
 #include <gtest/gtest.h>
 #include <rapidcheck.h>
@@ -112,6 +113,32 @@ RC_GTEST_PROP(Properties, CompressorBoundRgb, ()) {
     checkCompressed(f, g, eps);
     if (!allowMono) RC_ASSERT(g.channels() == 3);
     if (allowMono && f.isMonochrome()) RC_ASSERT(g.channels() == 1);
+}
+
+// Centred segments keep the same guarantee, for one channel and for RGB
+// (apart, identical or within a spread), the function taken as one run (in
+// blocks of eight where segments are long enough) or vertex by vertex.
+RC_GTEST_PROP(Properties, CentredCompressorBound, ()) {
+    const auto codes = *genCodes();
+    const float grid = *genGrid();
+    const double eps = *genTolerance();
+    const int channels = *rc::gen::element(1, 3);
+    const int greyMode = channels == 3 ? *uniform(0, 3) : 0;
+    const float spread = static_cast<float>(eps * *rc::gen::element(0.5, 1.0, 2.0));
+    const VisibilityFunction f = build(codes, channels, grid, greyMode, spread);
+    dsm::CompressorOptions options;
+    options.tolerance = eps;
+    options.channels = channels;
+    options.keepCounts = true;
+    options.centred = true;
+    dsm::Compressor compressor(options);
+    if (*rc::gen::arbitrary<bool>()) {
+        RC_ASSERT(compressor.pushValid(f.depths().data(), f.allValues().data(), f.counts().data(), f.size()) ==
+                  f.size());
+    } else {
+        for (std::size_t i = 0; i < f.size(); ++i) RC_ASSERT(compressor.push(f.z(i), f.values(i), f.count(i)));
+    }
+    checkCompressed(f, compressor.finish(), eps);
 }
 
 RC_GTEST_PROP(Properties, CompressorBoundDoubleInput, ()) {
