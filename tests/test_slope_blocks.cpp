@@ -62,7 +62,9 @@ void checkVariant(std::size_t (*blocks)(const float*, const T*, const double*, c
         std::vector<T> v(n);
         std::vector<std::uint32_t> counts(n);
         std::vector<double> bands(n);  // each vertex's own (grey RGB input)
-        double depth = originZ + 1e-3 * unit(rng), value = originV;
+        // From the open segment's first vertex (at originZ + 1e-3) on: depths never fall,
+        // and each differs from the origin's (the blocks' preconditions).
+        double depth = originZ + 1e-3 * (1.0 + unit(rng)), value = originV;
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
             if (rng() % 3 != 0) depth += 0.05 * unit(rng);
@@ -164,7 +166,9 @@ void checkRgbVariant(std::size_t (*blocks)(const float*, const T*, const std::ui
         std::vector<float> z(n);
         std::vector<T> v(3 * n);
         std::vector<std::uint32_t> counts(n);
-        double depth = originZ + 1e-3 * unit(rng);
+        // From the open segment's first vertex (at originZ + 1e-3) on: depths never fall,
+        // and each differs from the origin's (the blocks' preconditions).
+        double depth = originZ + 1e-3 * (1.0 + unit(rng));
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
             if (rng() % 3 != 0) depth += 0.05 * unit(rng);
@@ -293,7 +297,9 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const dou
         std::vector<T> v(n);
         std::vector<std::uint32_t> counts(n);
         std::vector<double> bands(n);  // each vertex's own (grey RGB input)
-        double depth = originZ + 1e-3 * unit(rng), value = originV;
+        // From the open segment's first vertex (at originZ + 1e-3) on: depths never fall,
+        // and each differs from the origin's (the blocks' preconditions).
+        double depth = originZ + 1e-3 * (1.0 + unit(rng)), value = originV;
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
             if (rng() % 3 != 0) depth += 0.05 * unit(rng);
@@ -377,7 +383,9 @@ void checkCentredRgbVariant(std::size_t (*blocks)(const float*, const T*, const 
         std::vector<float> z(n);
         std::vector<T> v(3 * n);
         std::vector<std::uint32_t> counts(n);
-        double depth = originZ + 1e-3 * unit(rng);
+        // From the open segment's first vertex (at originZ + 1e-3) on: depths never fall,
+        // and each differs from the origin's (the blocks' preconditions).
+        double depth = originZ + 1e-3 * (1.0 + unit(rng));
         const double fall = trial % 3 == 0 ? 0.002 : 0.05;
         for (std::size_t i = 0; i < n; ++i) {
             if (rng() % 3 != 0) depth += 0.05 * unit(rng);
