@@ -278,13 +278,36 @@ std::size_t takenInBlocks(std::size_t walked, std::size_t n) {
     return endsInABlock(walked, n) ? walked : walked / 8 * 8;
 }
 
+// How often a check met each case worth covering: segments that end within
+// the run (part way through a block among them), runs taken to their last
+// whole block, and balanced vertices found in blocks. Each must come many
+// times.
+struct CentredCoverage {
+    int ended = 0, endedPartWay = 0, whole = 0, balancedInBlocks = 0;
+
+    template <int C>
+    void note(std::size_t walked, std::size_t n, const CentredRunOf<C>& expected, const CentredRunOf<C>& start) {
+        const bool endsInBlock = endsInABlock(walked, n);
+        (endsInBlock ? ended : whole) += 1;
+        if (endsInBlock && walked % 8 != 0) ++endedPartWay;
+        if (expected.balancedAt != start.balancedAt) ++balancedInBlocks;
+    }
+
+    void expectEachManyTimes(const char* name) const {
+        EXPECT_GT(ended, 300) << name;
+        EXPECT_GT(endedPartWay, 300) << name;
+        EXPECT_GT(whole, 300) << name;
+        EXPECT_GT(balancedInBlocks, 300) << name;
+    }
+};
+
 template <typename T>
 void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const double*, const std::uint32_t*,
                                                std::size_t, const CentredFrame&, CentredRun&),
                          const char* name) {
     std::mt19937_64 rng(41);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
-    int ended = 0, endedPartWay = 0, whole = 0, balancedInBlocks = 0;
+    CentredCoverage coverage;
     for (int trial = 0; trial < 3000; ++trial) {
         const std::size_t n = rng() % 120;
         const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
@@ -321,7 +344,6 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const dou
             const std::vector<CentredRun> walk =
                 centredWalk(z, v, ownBands ? &bands : nullptr, withCounts ? &counts : nullptr, frame, start);
             const std::size_t walked = walk.size() - 1, taken = takenInBlocks(walked, n);
-            const bool endsInBlock = endsInABlock(walked, n);
             const CentredRun& expected = walk[taken];
             CentredRun got = start;
             const std::size_t took = blocks(z.data(), v.data(), ownBands ? bands.data() : nullptr,
@@ -331,20 +353,10 @@ void checkCentredVariant(std::size_t (*blocks)(const float*, const T*, const dou
             ASSERT_EQ(took, taken) << what;
             expectSameRun(got, expected, what);
             if (::testing::Test::HasFailure()) return;
-            if (withCounts && !ownBands) {
-                (endsInBlock ? ended : whole) += 1;
-                if (endsInBlock && walked % 8 != 0) ++endedPartWay;
-                if (expected.balancedAt != start.balancedAt) ++balancedInBlocks;
-            }
+            if (withCounts && !ownBands) coverage.note(walked, n, expected, start);
         }
     }
-    // Segments that end within the run (part way through a block among
-    // them), runs taken to their last whole block, and balanced vertices
-    // found in blocks, each many times.
-    EXPECT_GT(ended, 300) << name;
-    EXPECT_GT(endedPartWay, 300) << name;
-    EXPECT_GT(whole, 300) << name;
-    EXPECT_GT(balancedInBlocks, 300) << name;
+    coverage.expectEachManyTimes(name);
 }
 
 TEST(SlopeBlocks, BaselineCentredBlocksTakeWhatTheWalkWould) {
@@ -368,7 +380,7 @@ void checkCentredRgbVariant(std::size_t (*blocks)(const float*, const T*, const 
                             const char* name) {
     std::mt19937_64 rng(43);
     std::uniform_real_distribution<double> unit(0.0, 1.0);
-    int ended = 0, endedPartWay = 0, whole = 0, balancedInBlocks = 0;
+    CentredCoverage coverage;
     for (int trial = 0; trial < 3000; ++trial) {
         const std::size_t n = rng() % 120;
         const float originZ = static_cast<float>(0.5 + 4.0 * unit(rng));
@@ -420,24 +432,16 @@ void checkCentredRgbVariant(std::size_t (*blocks)(const float*, const T*, const 
             const std::vector<CentredRunOf<3>> walk =
                 centredWalk(z, v, nullptr, withCounts ? &counts : nullptr, frame, start);
             const std::size_t walked = walk.size() - 1, taken = takenInBlocks(walked, n);
-            const bool endsInBlock = endsInABlock(walked, n);
             CentredRunOf<3> got = start;
             const std::size_t took = blocks(z.data(), v.data(), withCounts ? counts.data() : nullptr, n, frame, got);
             const std::string what = std::string(name) + " trial " + std::to_string(trial);
             ASSERT_EQ(took, taken) << what;
             expectSameRun(got, walk[taken], what);
             if (::testing::Test::HasFailure()) return;
-            if (withCounts) {
-                (endsInBlock ? ended : whole) += 1;
-                if (endsInBlock && walked % 8 != 0) ++endedPartWay;
-                if (walk[taken].balancedAt != start.balancedAt) ++balancedInBlocks;
-            }
+            if (withCounts) coverage.note(walked, n, walk[taken], start);
         }
     }
-    EXPECT_GT(ended, 300) << name;
-    EXPECT_GT(endedPartWay, 300) << name;
-    EXPECT_GT(whole, 300) << name;
-    EXPECT_GT(balancedInBlocks, 300) << name;
+    coverage.expectEachManyTimes(name);
 }
 
 TEST(SlopeBlocks, BaselineCentredRgbBlocksTakeWhatTheWalkWould) {

@@ -397,65 +397,40 @@ public:
             for (; i < n; ++i)
                 if (!detail::takeCentredVertex(z[i], v + i * nc, withCounts ? counts[i] : 0u, i, frame, r)) break;
         }
-        CentredState<C> atBalance, after;
-        if (r.balancedAt != detail::kNotBalanced) {
-            for (int c = 0; c < C; ++c) {
-                atBalance.lo[c] = r.balancedLo[c];
-                atBalance.hi[c] = r.balancedHi[c];
-                atBalance.twiceIntegral[c] = r.balancedIntegral[c];
-                atBalance.inputV[c] = static_cast<double>(v[r.balancedAt * nc + static_cast<std::size_t>(c)]);
-                atBalance.longest.endV[c] = r.balancedLongestEndV[c];
-            }
-            atBalance.longest.length = r.balancedLongest;
-            atBalance.longest.endDz = r.balancedLongestEndDz;
-            atBalance.count = r.balancedCount;
-        }
-        for (int c = 0; c < C; ++c) {
-            after.lo[c] = r.lo[c];
-            after.hi[c] = r.hi[c];
-            after.twiceIntegral[c] = r.twiceIntegral[c];
-            after.inputV[c] = r.previousV[c];
-            after.longest.endV[c] = r.longestEndV[c];
-        }
-        after.longest.length = r.longest;
-        after.longest.endDz = r.longestEndDz;
-        after.count = r.count;
-        return endCentredRun<C>(z, v, vertexCounts, n, i, band, bands, r.balancedAt, atBalance, after);
+        return endCentredRun<C>(z, v, vertexCounts, n, i, band, bands, r);
     }
 
-    // A centred segment's state after a vertex, in slopes: each channel's
-    // window [lo, hi], twice the input's integral and the input's value
-    // there, the longest stretch so far, and the counts a run took.
-    template <int C>
-    struct CentredState {
-        double lo[C], hi[C], twiceIntegral[C], inputV[C];
-        LongestStretch longest;
-        std::uint64_t count;
-    };
-
     // Ends a centred run of C channels that took its vertices up to i
-    // (exclusive). Its last balanced vertex b (kNotBalanced when none; its
-    // state atBalance) becomes the balanced point. When the segment then
-    // closes within the run (i < n) and none of its vertices waits from an
-    // earlier run, it closes at b here, and the count returned ends there:
-    // the caller takes the vertices after it again from its own arrays, as
-    // replay() would take them from copies. Otherwise the vertices after b
-    // wait in pending_ (each of band bands[k], or all of `band`), as
-    // notePoint() would leave them vertex by vertex; the state after the run
-    // becomes the open segment's, and i is returned. Inlined: a call and its
-    // copies of the states cost a one-channel run 2 % more instructions.
+    // (exclusive), in the state r. Its last balanced vertex r.balancedAt
+    // (kNotBalanced when none), with the state there, becomes the balanced
+    // point. When the segment then closes within the run (i < n) and none of
+    // its vertices waits from an earlier run, it closes at that vertex here,
+    // and the count returned ends there: the caller takes the vertices after
+    // it again from its own arrays, as replay() would take them from copies.
+    // Otherwise the vertices after it wait in pending_ (each of band
+    // bands[k], or all of `band`), as notePoint() would leave them vertex by
+    // vertex; the state after the run becomes the open segment's, and i is
+    // returned. Inlined: a call costs a one-channel run 2 % more instructions.
     template <int C, typename T>
     [[gnu::always_inline]] std::size_t endCentredRun(const float* z, const T* v, const std::uint32_t* counts,
                                                      std::size_t n, std::size_t i, double band, const double* bands,
-                                                     std::size_t b, const CentredState<C>& atBalance,
-                                                     const CentredState<C>& after) {
+                                                     const detail::CentredRunOf<C>& r) {
         constexpr std::size_t nc = C;
+        const std::size_t b = r.balancedAt;
         std::size_t waiting = 0;  // the first of the run's vertices after its balanced point
         if (b != detail::kNotBalanced) {
             SlopeWindow w[C];
-            for (int c = 0; c < C; ++c) w[c] = SlopeWindow::ofSlopes(atBalance.lo[c], atBalance.hi[c], originV_[c]);
-            notePoint<C>(true, w, atBalance.twiceIntegral, atBalance.longest, atBalance.inputV, z[b], v + b * nc,
-                         counts ? counts[b] : 0u, band, segmentCount_ + atBalance.count);
+            double inputV[C];
+            LongestStretch longest;
+            longest.length = r.balancedLongest;
+            longest.endDz = r.balancedLongestEndDz;
+            for (int c = 0; c < C; ++c) {
+                w[c] = SlopeWindow::ofSlopes(r.balancedLo[c], r.balancedHi[c], originV_[c]);
+                inputV[c] = static_cast<double>(v[b * nc + static_cast<std::size_t>(c)]);
+                longest.endV[c] = r.balancedLongestEndV[c];
+            }
+            notePoint<C>(true, w, r.balancedIntegral, longest, inputV, z[b], v + b * nc, counts ? counts[b] : 0u, band,
+                         segmentCount_ + r.balancedCount);
             waiting = b + 1;
         }
         if (balancedPoint_.valid && pending_.empty() && i < n && i > waiting && i - waiting <= kMostPending) {
@@ -465,14 +440,14 @@ public:
         noteUnbalanced<C>(z + waiting, v + waiting * nc, counts ? counts + waiting : nullptr, i - waiting, band,
                           bands ? bands + waiting : nullptr);
         for (int c = 0; c < C; ++c) {
-            window_[c] = SlopeWindow::ofSlopes(after.lo[c], after.hi[c], originV_[c]);
-            twiceIntegral_[c] = after.twiceIntegral[c];
-            inputV_[c] = after.inputV[c];
-            longest_.endV[c] = after.longest.endV[c];
+            window_[c] = SlopeWindow::ofSlopes(r.lo[c], r.hi[c], originV_[c]);
+            twiceIntegral_[c] = r.twiceIntegral[c];
+            inputV_[c] = r.previousV[c];
+            longest_.endV[c] = r.longestEndV[c];
         }
-        longest_.length = after.longest.length;
-        longest_.endDz = after.longest.endDz;
-        segmentCount_ += after.count;
+        longest_.length = r.longest;
+        longest_.endDz = r.longestEndDz;
+        segmentCount_ += r.count;
         if (i > 0) lastZ_ = z[i - 1];
         return i;
     }
