@@ -108,6 +108,51 @@ TEST(Samplers, SurfacesReachingBehindThePerspectiveLightAgree) {
     expectBothSamplersAgree(scene, smallBuild(), dir, "behind");
 }
 
+// A quad is the image of the scene's rectangle under its transform: under
+// a scale unequal along its axes, a parallelogram. Both samplers reach it
+// through the bounds of its corners, so its crossing test must keep to them.
+TEST(Samplers, QuadsUnderUnequalScalesAgree) {
+    const TempDir dir;
+    const dsm::Scene scene = dsm::parseScene(R"({
+      "light": {"type": "spot", "position": [2, 6, 1.5], "look_at": [0, 0, 0], "fov": 70, "resolution": [40, 40]},
+      "objects": [
+        {"type": "quad", "name": "rhombus", "u": [1, 0, 1], "v": [-1, 0, 1], "opacity": 0.6,
+         "transform": {"scale": [3, 1, 1]}},
+        {"type": "quad", "name": "sheared", "center": [0, 1, 0], "u": [0.5, 0.5, 0], "v": [0, 0, 1],
+         "opacity": 0.4,
+         "transform": [{"scale": [2.5, 0.3, 1]}, {"rotate": {"axis": [1, 1, 0], "angle": 40}}]}
+      ]})",
+                                             dir.path().string(), "sheared.json");
+    expectBothSamplersAgree(scene, smallBuild(), dir, "sheared");
+}
+
+// The rhombus with corners (+-6, 0, 0) and (0, 0, +-2): rays straight down
+// cross it just inside each corner and edge and miss it just outside, as they
+// do the two triangles of its corners (the reference tracer's quad).
+TEST(ScenePrimitives, AQuadUnderAnUnequalScaleIsTheParallelogramOfItsCorners) {
+    const TempDir dir;
+    const dsm::Scene scene = dsm::parseScene(R"({
+      "light": {"type": "distant", "position": [0, 5, 0], "direction": [0, -1, 0], "up": [0, 0, -1], "extent": 8},
+      "objects": [{"type": "quad", "u": [1, 0, 1], "v": [-1, 0, 1], "transform": {"scale": [3, 1, 1]}}]})",
+                                             dir.path().string(), "rhombus.json");
+    const dsm::ScenePrimitives surfaces(scene);
+    ASSERT_EQ(surfaces.size(), 1u);
+    const dsm::Vec3 corners[] = {{6, 0, 0}, {0, 0, 2}, {-6, 0, 0}, {0, 0, -2}};
+    for (int k = 0; k < 4; ++k) {
+        const dsm::Vec3& a = corners[k];
+        const dsm::Vec3& b = corners[(k + 1) % 4];
+        for (double along : {0.0, 0.03, 0.5, 0.97})  // from corner a toward b
+            for (double fromCentre : {0.97, 1.03}) {  // the point on the edge, scaled about the centre
+                const double x = (a[0] + along * (b[0] - a[0])) * fromCentre;
+                const double z = (a[2] + along * (b[2] - a[2])) * fromCentre;
+                dsm::RaySurfaceHits hits;
+                surfaces.intersect(surfaces.all()[0], dsm::Vec3{x, 5, z}, dsm::Vec3{0, -1, 0}, 0.0, 0.0, hits);
+                ASSERT_EQ(hits.size(), fromCentre < 1.0 ? 1u : 0u) << "at " << x << ", " << z;
+                for (const dsm::RaySurfaceHit& hit : hits) EXPECT_DOUBLE_EQ(hit.t, 5.0);
+            }
+    }
+}
+
 TEST(Samplers, ARegionOfTheScanlineSamplerEqualsTheFullBuild) {
     const TempDir dir;
     const dsm::Scene scene = dsm::loadScene(DSM_SOURCE_DIR "/examples/hairball.json");

@@ -15,6 +15,16 @@ namespace {
 // Mean linear scale of an affine map (for widths of curves).
 double linearScale(const Affine& m) { return std::cbrt(std::abs(determinant3(m))); }
 
+// A quad's world axes with what its crossing test needs of them. The scene
+// checked u and v non-zero and perpendicular, and the transform non-singular,
+// so the normal is non-zero; should its square still round to 0 or overflow,
+// the test's coordinates are not finite and no ray crosses the quad.
+ScenePrimitives::Quad worldQuad(const Vec3& centre, const Vec3& u, const Vec3& v) {
+    const Vec3 normal = cross(u, v);
+    const double area2 = dot(normal, normal);
+    return {centre, u, v, normal, scale(cross(v, normal), 1.0 / area2), scale(cross(normal, u), 1.0 / area2)};
+}
+
 }  // namespace
 
 ScenePrimitives::ScenePrimitives(const Scene& scene) {
@@ -65,8 +75,8 @@ ScenePrimitives::ScenePrimitives(const Scene& scene) {
                     spheres_.push_back({inverseAffine(toWorld, what), g.center, g.radius});
                 } else if constexpr (std::is_same_v<G, dsm::Quad>) {
                     primitives_.push_back({PrimitiveKind::Quad, o, static_cast<std::uint32_t>(quads_.size())});
-                    quads_.push_back({transformPoint(toWorld, g.center), transformVector(toWorld, g.halfU),
-                                      transformVector(toWorld, g.halfV)});
+                    quads_.push_back(worldQuad(transformPoint(toWorld, g.center), transformVector(toWorld, g.halfU),
+                                               transformVector(toWorld, g.halfV)));
                 } else if constexpr (std::is_same_v<G, Curves>) {
                     const double widthScale = 0.5 * linearScale(toWorld);
                     std::size_t first = 0;

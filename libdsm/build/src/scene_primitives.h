@@ -80,8 +80,14 @@ public:
         Vec3 centre;
         double radius;
     };
+    // The image of the scene's rectangle: a parallelogram in the world when
+    // the transform shears or scales its axes unequally. A point centre + a u
+    // + b v of its plane has a = (point - centre) . acrossU and b likewise,
+    // whether or not u and v are perpendicular.
     struct Quad {
         Vec3 centre, u, v;
+        Vec3 normal;            // u x v
+        Vec3 acrossU, acrossV;  // (v x normal) / |normal|^2, (normal x u) / |normal|^2
     };
     struct Segment {
         Vec3 p0, p1;
@@ -174,14 +180,13 @@ private:
                        RaySurfaceHits& out) const {
         using namespace detail;
         const Quad& q = quads_[p.index];
-        const Vec3 n = cross(q.u, q.v);
-        const double denom = dot(n, d);
+        const double denom = dot(q.normal, d);
         if (denom == 0.0) return;
-        const double t = dot(n, sub(q.centre, origin)) / denom;
+        const double t = dot(q.normal, sub(q.centre, origin)) / denom;
         if (!(t > tMin)) return;
         const Vec3 rel = sub(add(origin, scale(d, t)), q.centre);
-        const double u = dot(rel, q.u) / dot(q.u, q.u), v = dot(rel, q.v) / dot(q.v, q.v);
-        if (std::abs(u) <= 1.0 && std::abs(v) <= 1.0) out.push_back({t, p.object});
+        const double a = dot(rel, q.acrossU), b = dot(rel, q.acrossV);
+        if (std::abs(a) <= 1.0 && std::abs(b) <= 1.0) out.push_back({t, p.object});
     }
 
     // A ribbon facing the ray: a hit where the ray passes the segment's axis
