@@ -479,6 +479,25 @@ TEST(RayCaster, FindsEveryCrossingOfMovingSurfacesAtTheRaysTime) {
     expectEveryCrossingFound(scene, rng);
 }
 
+// Embree passes over a ribbon's crossings near its ray's origin (by a
+// multiple of the ribbon's radius), and its rays start just before the
+// scene's box: a curl of segments far wider than they are long, whose
+// ribbons fill the box, must still give every crossing the exact test finds.
+TEST(RayCaster, FindsCrossingsOfRibbonsWiderThanTheirSegments) {
+    dsm::Curves curl;
+    curl.pointsPerCurve = {40};
+    for (int i = 0; i < 40; ++i) {
+        const float angle = 0.4f * static_cast<float>(i);
+        curl.points.push_back({0.1f * std::cos(angle), 0.1f * std::sin(angle), 0.005f * static_cast<float>(i)});
+        curl.widths.push_back(0.3f + 0.5f * static_cast<float>(i % 3) / 2.0f);  // 0.3 to 0.8
+    }
+    curl.widths.erase(curl.widths.begin());  // the default single width
+    dsm::Scene scene;
+    scene.objects.push_back({"curl", curl});
+    std::mt19937_64 rng(13);
+    expectEveryCrossingFound(scene, rng);
+}
+
 // Hair is found through Embree's own ribbons, whose float test decides only
 // which segments the exact test then sees: rays that pass a segment just
 // inside its half-width, anywhere along it up to its ends, from near and

@@ -58,6 +58,13 @@ struct VolumeData {
 // reaches every primitive the exact test in double precision crosses.
 constexpr double kBoxSlack = 1e-5;
 
+// Embree ignores a ribbon's crossing nearer its ray's origin than a multiple
+// of the ribbon's radius (EMBREE_CURVE_SELF_INTERSECTION_AVOIDANCE_FACTOR,
+// measured 2 with Debian's Embree 3.13), to spare a ray leaving a strand the
+// strand itself. These rays leave no strand, so Embree's ray starts this many
+// of the widest ribbon's radii (twice that factor) before the scene's box.
+constexpr double kRibbonRadiiBeforeTheBox = 4.0;
+
 constexpr const char* kWho = "ray caster";  // in Embree's errors
 
 // One object's primitives (consecutive in ScenePrimitives::all()), as one
@@ -141,6 +148,9 @@ struct RayCaster::Impl {
     std::vector<ObjectGeometry> geometries;
     Bounds3 sceneBox;  // every surface over the shutter, padded like the primitives
     double pad = 0.0;
+    // How far before the scene's box Embree's ray starts: the pad, and room
+    // for Embree's nearest ribbon crossings (kRibbonRadiiBeforeTheBox).
+    double startBeforeTheBox = 0.0;
 
     // Segments [first, end) as Embree ribbons of two vertices each, at the
     // shutter's start and, when they move, its end; every radius is widened
@@ -179,6 +189,13 @@ struct RayCaster::Impl {
         for (std::size_t a = 0; a < 3; ++a) size = std::max({size, std::abs(sceneBox.lo[a]), std::abs(sceneBox.hi[a])});
         pad = kBoxSlack * size + std::numeric_limits<double>::min();
         sceneBox.pad(pad);
+        double widestRibbon = 0.0;  // radius as Embree is given it
+        for (const Primitive& p : primitives)
+            if (p.kind == PrimitiveKind::Segment) {
+                const ScenePrimitives::Segment& s = surfaces.segment(p);
+                widestRibbon = std::max(widestRibbon, std::max(s.r0, s.r1) + pad);
+            }
+        startBeforeTheBox = pad + kRibbonRadiiBeforeTheBox * widestRibbon;
 
         device = newEmbreeDevice(kWho);
         embreeScene = rtcNewScene(device);
@@ -258,8 +275,9 @@ void RayCaster::surfaceHits(const Vec3& origin, const Vec3& direction, double ti
     // rounding to floats is relative to the scene's size, not to the origin's
     // distance; the crossings' parameters are computed on the original ray.
     // It starts a little before, so that crossings just beyond tMin lie
-    // well inside Embree's [0, infinity) whatever its float arithmetic.
-    const Vec3 start = add(origin, scale(direction, t0 - s.pad / std::sqrt(dot(direction, direction))));
+    // well inside Embree's [0, infinity) whatever its float arithmetic, and
+    // Embree does not pass over ribbons near its ray's origin.
+    const Vec3 start = add(origin, scale(direction, t0 - s.startBeforeTheBox / std::sqrt(dot(direction, direction))));
     RTCRayHit rayHit{};
     rayHit.ray = embreeRay(start, direction, std::numeric_limits<double>::infinity(), std::clamp(time, 0.0, 1.0));
     rayHit.hit.geomID = RTC_INVALID_GEOMETRY_ID;
