@@ -455,6 +455,38 @@ TEST(MergeStitch, ZstdPartsBecomeTheZstdBuildByteForByte) {
     EXPECT_EQ(readFile(out), readFile(full));
 }
 
+// Parts of a build with centred segments stitch into that build: the mip
+// levels are rebuilt with centred segments too, as the metadata records.
+TEST(MergeStitch, CentredPartsBecomeTheCentredBuildByteForByte) {
+    TempDir dir;
+    RegionBuild b;
+    b.options.centredCompression = true;
+    const std::string full = b.build(dir / "full.dsm", {0, 0, 0, 0});
+    const std::vector<std::string> parts = {b.build(dir / "left.dsm", {0, 0, 13, 29}),
+                                            b.build(dir / "right.dsm", {13, 0, 37, 29})};
+    MergeOptions options;
+    options.mode = MergeMode::Stitch;
+    const std::string out = (dir / "stitched.dsm").string();
+    mergeMaps(parts, out, options);
+    EXPECT_EQ(readFile(out), readFile(full));
+}
+
+// A compression this version does not know cannot have its mip levels rebuilt.
+TEST(MergeStitch, AnUnknownCompressionSettingIsRefused) {
+    TempDir dir;
+    std::mt19937_64 rng(3);
+    WriterOptions w = smallMapOptions(1, false);
+    w.metadata = R"({"settings": {"region": [0, 0, 8, 8], "compression": "cubic"}})";
+    writeMap(dir / "cubic.dsm", w,
+             makeImage(8, 8, [&](std::uint32_t, std::uint32_t) { return randomFunction(rng, 1, false, 1, 3); }));
+    MergeOptions options;
+    options.mode = MergeMode::Stitch;
+    const std::string out = (dir / "out.dsm").string();
+    const std::string m = messageOf({(dir / "cubic.dsm").string()}, out, options);
+    EXPECT_NE(m.find("settings.compression \"cubic\" is not \"centred\""), std::string::npos) << m;
+    EXPECT_FALSE(std::filesystem::exists(out));
+}
+
 TEST(MergeStitch, OverlapsAndHolesAreListed) {
     TempDir dir;
     const RegionBuild b;

@@ -255,6 +255,20 @@ using Rect = std::array<std::uint32_t, 4>;  // x0, y0, x1, y1, half-open
 
 std::string rectText(const Rect& r) { return concat(r[0], ",", r[1], ",", r[2], ",", r[3]); }
 
+// Whether the part's build compressed with centred segments (metadata
+// settings.compression "centred", dsm-build --centred-compression): the
+// mip levels rebuilt from its pixels must be compressed alike. Absent, the
+// build used the greedy rule; another value is a setting this version cannot
+// reproduce. `metadata` has an object `settings` (regionOf() checked it).
+bool centredCompressionOf(const DeepShadowMap& map, const Json& metadata) {
+    const Json& settings = metadata.at("settings");
+    const auto compression = settings.find("compression");
+    if (compression == settings.end()) return false;
+    if (compression->is_string() && *compression == "centred") return true;
+    throw Error(ErrorCode::argument, concat(quoted(map.path()), ": settings.compression ", compression->dump(),
+                                            " is not \"centred\": the mip levels cannot be rebuilt as the build's"));
+}
+
 Rect regionOf(const DeepShadowMap& map, const Json& metadata) {
     const auto missing = [&](const std::string& why) {
         return Error(ErrorCode::argument,
@@ -439,6 +453,7 @@ MergeReport stitchMaps(const std::vector<Map>& maps, const std::string& output, 
     w.quantiseValues = info.levels.at(0).valueStep > 0.0;
     w.areaLightRadius = info.areaLightRadius;
     w.areaLightPlaneDepth = info.areaLightPlaneDepth;
+    w.centredCompression = centredCompressionOf(first, metadata.front());  // the parts' metadata are equal
     Json merged = metadata.front();
     merged["settings"]["region"] = Rect{0, 0, info.width, info.height};
     w.metadata = merged.dump();
