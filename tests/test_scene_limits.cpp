@@ -174,6 +174,11 @@ TEST(SceneLimits, HugeTranslationsAndScalesAreRefused) {
     expectSceneError(sceneText(R"({"type": "sphere", "radius": 1,
                                    "transform": [1e-7, 0, 0, 0,  0, 1e-7, 0, 0,  0, 0, 1e-7, 0,  0, 0, 0, 1]})"),
                      "/objects/0/transform: the transform is singular or nearly so");
+    // Just under the limit: the determinant is given to 17 digits, not rounded onto the limit.
+    expectSceneError(sceneText(R"({"type": "sphere", "radius": 1,
+                                   "transform": [{"scale": 1e-6}, {"scale": [1, 1, 0.9999999999]}]})"),
+                     "/objects/0/transform: the transform is singular or nearly so (the determinant of its 3x3 "
+                     "part is 9.99999999");
     expectSceneError(sceneText(R"({"type": "sphere", "radius": 1,
                                    "transform": {"rotate": {"axis": [0, 1, 0], "angle": 1e300}}})"),
                      "/objects/0/transform/rotate/angle: expected a number in [-1000000, 1000000]");

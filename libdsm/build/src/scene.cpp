@@ -487,8 +487,9 @@ void checkTransform(const Parser& p, const Mat4& m, const std::string& path) {
     const double det = m[0] * (m[5] * m[10] - m[6] * m[9]) - m[1] * (m[4] * m[10] - m[6] * m[8]) +
                        m[2] * (m[4] * m[9] - m[5] * m[8]);
     if (!(std::abs(det) >= kMinDeterminant))
-        p.fail(path, detail::concat("the transform is singular or nearly so (the determinant of its 3x3 part is ", det,
-                                    "; at least ", kMinDeterminant, " in magnitude is needed)"));
+        p.fail(path, detail::concat("the transform is singular or nearly so (the determinant of its 3x3 part is ",
+                                    detail::exactNumber(det), "; at least ", kMinDeterminant,
+                                    " in magnitude is needed)"));
 }
 
 Mat4 parseTransform(const Parser& p, const json& v, const std::string& path) {

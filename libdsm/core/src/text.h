@@ -2,6 +2,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdio>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -17,6 +18,15 @@ std::string concat(Args&&... args) {
     out.precision(9);
     (out << ... << std::forward<Args>(args));
     return out.str();
+}
+
+/// `v` with 17 significant digits, which tell any two doubles apart: for a
+/// message about a double that concat()'s 9 digits would round onto the
+/// limit it misses, or onto another map's value.
+inline std::string exactNumber(double v) {
+    char buffer[32];
+    std::snprintf(buffer, sizeof buffer, "%.17g", v);
+    return buffer;
 }
 
 /// Longest piece of user text (a key, a name, a file name, a JSON excerpt)

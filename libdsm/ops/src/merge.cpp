@@ -10,7 +10,6 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
-#include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <optional>
@@ -30,6 +29,7 @@
 DSM_NAMESPACE_BEGIN
 
 using detail::concat;
+using detail::exactNumber;
 
 namespace {
 
@@ -42,18 +42,12 @@ constexpr int kDefaultZlibLevel = 6;
 
 std::string quoted(const std::string& path) { return concat("'", path, "'"); }
 
-std::string number(double v) {
-    char buffer[40];
-    std::snprintf(buffer, sizeof buffer, "%.17g", v);
-    return buffer;
-}
-
 template <std::size_t N>
 std::string numbers(const std::array<double, N>& values) {
     std::string out = "[";
     for (std::size_t i = 0; i < N; ++i) {
         if (i) out += ',';
-        out += number(values[i]);
+        out += exactNumber(values[i]);
     }
     return out + "]";
 }
@@ -78,9 +72,9 @@ void requireSameGeometry(const DeepShadowMap& map, const DeepShadowMap& first) {
     requireSame("the light's world-to-light matrix", numbers(a.camera.worldToLight), numbers(b.camera.worldToLight), p,
                 q);
     requireSame("the light's screen window", numbers(a.camera.screenWindow), numbers(b.camera.screenWindow), p, q);
-    requireSame("the light's near plane", number(a.camera.nearPlane), number(b.camera.nearPlane), p, q);
+    requireSame("the light's near plane", exactNumber(a.camera.nearPlane), exactNumber(b.camera.nearPlane), p, q);
     requireSame("the pixel filter", filterName(a.filter), filterName(b.filter), p, q);
-    requireSame("the filter width", number(a.filterWidth), number(b.filterWidth), p, q);
+    requireSame("the filter width", exactNumber(a.filterWidth), exactNumber(b.filterWidth), p, q);
 }
 
 Json parseMetadata(const DeepShadowMap& map) {
@@ -323,16 +317,16 @@ void requireSameStitchSettings(const DeepShadowMap& map, const DeepShadowMap& fi
     requireSame("the layer count", concat(a.maxLayers), concat(b.maxLayers), p, q);
     requireSame("the mip level count", concat(a.levels.size()), concat(b.levels.size()), p, q);
     for (std::size_t l = 0; l < a.levels.size(); ++l) {
-        requireSame(concat("the level ", l, " tolerance"), number(a.levels[l].tolerance), number(b.levels[l].tolerance),
-                    p, q);
-        requireSame(concat("the level ", l, " value step"), number(a.levels[l].valueStep),
-                    number(b.levels[l].valueStep), p, q);
+        requireSame(concat("the level ", l, " tolerance"), exactNumber(a.levels[l].tolerance),
+                    exactNumber(b.levels[l].tolerance), p, q);
+        requireSame(concat("the level ", l, " value step"), exactNumber(a.levels[l].valueStep),
+                    exactNumber(b.levels[l].valueStep), p, q);
     }
     requireSame("the tile codec", a.codec == TileCodec::Zstd ? "zstd" : "zlib", b.codec == TileCodec::Zstd ? "zstd" : "zlib",
                 p, q);
     requireSame("the zlib level", concat(a.codecLevel), concat(b.codecLevel), p, q);
-    requireSame("the area light", number(a.areaLightRadius) + " at " + number(a.areaLightPlaneDepth),
-                number(b.areaLightRadius) + " at " + number(b.areaLightPlaneDepth), p, q);
+    requireSame("the area light", exactNumber(a.areaLightRadius) + " at " + exactNumber(a.areaLightPlaneDepth),
+                exactNumber(b.areaLightRadius) + " at " + exactNumber(b.areaLightPlaneDepth), p, q);
     metadata["settings"].erase("region");
     firstMetadata["settings"].erase("region");
     if (auto difference = firstDifference(firstMetadata, metadata, ""))
