@@ -481,21 +481,71 @@ TEST(RayCaster, FindsEveryCrossingOfMovingSurfacesAtTheRaysTime) {
 
 // Embree passes over a ribbon's crossings near its ray's origin (by a
 // multiple of the ribbon's radius), and its rays start just before the
-// scene's box: a curl of segments far wider than they are long, whose
-// ribbons fill the box, must still give every crossing the exact test finds.
-TEST(RayCaster, FindsCrossingsOfRibbonsWiderThanTheirSegments) {
+// scene's box: a curl of ribbons nearly as wide as they are long (half-widths
+// up to 0.18 on segments 0.2 long), which fill the box, must still give every
+// crossing the exact test finds.
+TEST(RayCaster, FindsCrossingsOfRibbonsNearlyAsWideAsLong) {
     dsm::Curves curl;
     curl.pointsPerCurve = {40};
     for (int i = 0; i < 40; ++i) {
         const float angle = 0.4f * static_cast<float>(i);
-        curl.points.push_back({0.1f * std::cos(angle), 0.1f * std::sin(angle), 0.005f * static_cast<float>(i)});
-        curl.widths.push_back(0.3f + 0.5f * static_cast<float>(i % 3) / 2.0f);  // 0.3 to 0.8
+        curl.points.push_back({0.5f * std::cos(angle), 0.5f * std::sin(angle), 0.01f * static_cast<float>(i)});
+        curl.widths.push_back(0.2f + 0.16f * static_cast<float>(i % 3) / 2.0f);  // 0.2 to 0.36
     }
     curl.widths.erase(curl.widths.begin());  // the default single width
     dsm::Scene scene;
     scene.objects.push_back({"curl", curl});
     std::mt19937_64 rng(13);
     expectEveryCrossingFound(scene, rng);
+}
+
+// A hair segment about a thousand times wider than long (0.35 long, half-
+// widths 43 and 445), from a random scene: Embree's hierarchy passed over its
+// crossing for some rays from the light, so such segments go to Embree as
+// boxes. Rays from the light through the pixels around it must get every
+// crossing the exact test finds.
+TEST(RayCaster, FindsCrossingsOfSegmentsFarWiderThanLong) {
+    const TempDir dir;
+    const dsm::Scene scene = dsm::parseScene(R"(
+      {"light": {"type": "spot", "position": [1019.4681071586524, -1441.8255250861964,
+      4255.523919345952], "look_at": [-384.35022014185915, 122.42165798926541, -863.6594269490745],
+      "fov": 4.935454853380962, "resolution": [31, 29]}, "objects": [{"type": "mesh",
+      "positions": [[-0.009826384120732445, -0.034018004686928505, -1.2080829061869234],
+      [-0.6509212268005595, 1.0416373335707168, 0.875846317630065], [-1.1987966330761308,
+      -1.4822198314471928, 1.024531704228047], [-2.125905204012806, -0.955475178574541,
+      -0.7970520462838069], [-0.5342149000127687, -0.24695859755628224, 1.1017580295744684],
+      [1.5934561272390044, -0.7921010588000843, -2.5844884049093113], [-0.23643131598712408,
+      -1.4048321284768746, -0.2756876239205375], [-0.4834285613407574, -0.6942278820506143,
+      0.836898526372535], [-0.5372846317858833, -1.00077094202734, -0.16002892051966677],
+      [-0.34435664787831843, -1.0111352950314128, -0.7597774177568741], [-1.0355450263566177,
+      -0.8942143563879068, -0.838712718034103]], "triangles": [[5, 2, 6], [1, 7, 10], [9, 2, 1]],
+      "transform": [{"scale": 2.1515161025988014, "rotate": {"axis": [-0.809133470003061,
+      -0.9613331945548635, -0.5554130398674448], "angle": -72.95098931065002}}, {"scale": 1000.0}]},
+      {"type": "curves", "points_per_curve": [2], "points": [[-0.11724855150515534,
+      0.24982535613374734, -1.2762999081646482], [-0.11733303309136962, 0.24969732554559226,
+      -1.276614085619963]], "width": [0.08651303614279257, 0.8894148661694283],
+      "transform": [{"scale": 1000.0}]}]}
+    )",
+                                             dir.path().string(), "wide.json");
+    const dsm::RayCaster caster(scene);
+    const dsm::ScenePrimitives& surfaces = caster.surfaces();
+    const dsm::detail::LightRayFrame frame = dsm::detail::lightRayFrame(dsm::lightCamera(scene.light), 31, 29);
+    const auto byDepth = [](const dsm::RaySurfaceHit& a, const dsm::RaySurfaceHit& b) { return a.t < b.t; };
+    std::size_t crossings = 0;
+    for (int i = 0; i < 40; ++i)
+        for (int j = 0; j < 40; ++j) {
+            dsm::Vec3 o, d;
+            frame.ray(20 + i / 20.0, 11 + j / 20.0, o, d);
+            dsm::RaySurfaceHits found, expected;
+            caster.surfaceHits(o, d, 0.0, 0.0, found);
+            for (const dsm::Primitive& p : surfaces.all()) surfaces.intersect(p, o, d, 0.0, 0.0, expected);
+            std::sort(found.begin(), found.end(), byDepth);
+            std::sort(expected.begin(), expected.end(), byDepth);
+            ASSERT_EQ(found.size(), expected.size()) << "ray " << i << ", " << j;
+            for (std::size_t k = 0; k < found.size(); ++k) ASSERT_EQ(found[k].t, expected[k].t);
+            crossings += found.size();
+        }
+    EXPECT_GT(crossings, 3000u);  // the rays meet the mesh and the segment
 }
 
 // Hair is found through Embree's own ribbons, whose float test decides only

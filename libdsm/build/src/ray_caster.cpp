@@ -67,15 +67,28 @@ constexpr double kRibbonRadiiBeforeTheBox = 4.0;
 
 constexpr const char* kWho = "ray caster";  // in Embree's errors
 
-// One object's primitives (consecutive in ScenePrimitives::all()), as one
-// Embree geometry: hair as Embree's own ray-facing ribbons, widened by `pad`
-// (found through oriented boxes around the strands, far tighter than
-// axis-aligned ones around diagonal hair), other surfaces as user geometry.
+// Primitives of one object as one Embree geometry: hair as Embree's own
+// ray-facing ribbons, widened by `pad` (found through oriented boxes around
+// the strands, far tighter than axis-aligned ones around diagonal hair),
+// other surfaces, and hair segments at least as wide as they are long, as
+// user geometry (boxes). Embree's primitive k is all()[members[k]].
 struct ObjectGeometry {
     const ScenePrimitives* surfaces;
-    std::uint32_t first;
+    const std::uint32_t* members;
     double pad;
+    const Primitive& primitive(unsigned k) const { return surfaces->all()[members[k]]; }
 };
+
+// Whether hair segment `s` goes to Embree as a box rather than a ribbon.
+// Embree's ribbons are made for strands; for a segment about a thousand times
+// wider than long its hierarchy was seen to pass over crossings the exact
+// test finds (for some ray origins, not for others). As a box, the exact
+// test decides every ray that reaches it.
+bool wideSegment(const ScenePrimitives::Segment& s) {
+    const Vec3 axis = sub(s.p1, s.p0);
+    const double widest = std::max(s.r0, s.r1);
+    return widest * widest >= dot(axis, axis);
+}
 
 // The context handed to Embree: Embree's part first, so the callbacks can
 // recover the rest from the RTCIntersectContext pointer they are given.
@@ -91,7 +104,7 @@ static_assert(std::is_standard_layout_v<HitContext>);
 
 void primitiveBounds(const RTCBoundsFunctionArguments* args) {
     const ObjectGeometry& g = *static_cast<const ObjectGeometry*>(args->geometryUserPtr);
-    const Primitive& p = g.surfaces->all()[g.first + args->primID];
+    const Primitive& p = g.primitive(args->primID);
     // Time step 1 (a moving object's only other one) is the shutter's end.
     Bounds3 b = g.surfaces->boundsAt(p, static_cast<double>(args->timeStep));
     b.pad(g.pad);
@@ -112,7 +125,7 @@ void primitiveBounds(const RTCBoundsFunctionArguments* args) {
 void primitiveHits(const RTCIntersectFunctionNArguments* args) {
     const ObjectGeometry& g = *static_cast<const ObjectGeometry*>(args->geometryUserPtr);
     const HitContext& c = *reinterpret_cast<const HitContext*>(args->context);
-    const Primitive& p = g.surfaces->all()[g.first + args->primID];
+    const Primitive& p = g.primitive(args->primID);
     for (unsigned i = 0; i < args->N; ++i)
         if (args->valid[i] != 0) g.surfaces->intersect(p, c.origin, c.direction, c.time, c.tMin, *c.out);
 }
@@ -124,7 +137,7 @@ void segmentHits(const RTCFilterFunctionNArguments* args) {
     const HitContext& c = *reinterpret_cast<const HitContext*>(args->context);
     for (unsigned i = 0; i < args->N; ++i) {
         if (args->valid[i] == 0) continue;
-        const Primitive& p = g.surfaces->all()[g.first + RTCHitN_primID(args->hit, args->N, i)];
+        const Primitive& p = g.primitive(RTCHitN_primID(args->hit, args->N, i));
         g.surfaces->intersect(p, c.origin, c.direction, c.time, c.tMin, *c.out);
         args->valid[i] = 0;
     }
@@ -146,26 +159,27 @@ struct RayCaster::Impl {
     RTCDevice device = nullptr;
     RTCScene embreeScene = nullptr;
     std::vector<ObjectGeometry> geometries;
+    std::vector<std::vector<std::uint32_t>> members;  // of each geometry (ObjectGeometry::members)
     Bounds3 sceneBox;  // every surface over the shutter, padded like the primitives
     double pad = 0.0;
     // How far before the scene's box Embree's ray starts: the pad, and room
     // for Embree's nearest ribbon crossings (kRibbonRadiiBeforeTheBox).
     double startBeforeTheBox = 0.0;
 
-    // Segments [first, end) as Embree ribbons of two vertices each, at the
+    // Segments `segments` as Embree ribbons of two vertices each, at the
     // shutter's start and, when they move, its end; every radius is widened
     // by `pad`, so that Embree's float test meets every segment the exact
     // test crosses (the widening is orders beyond the rounding).
-    void addRibbons(OwnedGeometry& g, std::size_t first, std::size_t end, const Vec3& motion, bool moving,
+    void addRibbons(OwnedGeometry& g, const std::vector<std::uint32_t>& segments, const Vec3& motion, bool moving,
                     const std::string& what) {
         const auto& primitives = surfaces.all();
-        const std::size_t count = end - first;
+        const std::size_t count = segments.size();
         for (unsigned step = 0; step < (moving ? 2u : 1u); ++step) {
             auto* v = static_cast<float*>(rtcSetNewGeometryBuffer(g.handle, RTC_BUFFER_TYPE_VERTEX, step,
                                                                   RTC_FORMAT_FLOAT4, 4 * sizeof(float), 2 * count));
             throwIfEmbreeFailed(device, kWho, detail::concat("allocating the vertices of ", what));
             const Vec3 offset = scale(motion, static_cast<double>(step));
-            for (std::size_t i = first; i < end; ++i) {
+            for (std::uint32_t i : segments) {
                 const ScenePrimitives::Segment& s = surfaces.segment(primitives[i]);
                 for (const auto& [point, radius] : {std::pair{s.p0, s.r0}, std::pair{s.p1, s.r1}}) {
                     for (std::size_t a = 0; a < 3; ++a) *v++ = static_cast<float>(point[a] + offset[a]);
@@ -179,8 +193,34 @@ struct RayCaster::Impl {
         for (std::size_t k = 0; k < count; ++k) index[k] = static_cast<unsigned>(2 * k);
     }
 
-    // Embree's hierarchy over the surfaces: one geometry per object,
-    // with a second time step for a moving one (its boxes follow it).
+    // One Embree geometry of `object`'s primitives `list`: ribbons, or boxes
+    // crossed by the exact test.
+    void addGeometry(std::uint32_t object, std::vector<std::uint32_t> list, bool ribbons, const std::string& what) {
+        const Vec3& m = surfaces.motion(object);
+        const bool moving = m[0] != 0.0 || m[1] != 0.0 || m[2] != 0.0;
+        members.push_back(std::move(list));
+        const std::vector<std::uint32_t>& mine = members.back();
+        geometries.push_back({&surfaces, mine.data(), pad});
+        OwnedGeometry g(rtcNewGeometry(device, ribbons ? RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE : RTC_GEOMETRY_TYPE_USER));
+        throwIfEmbreeFailed(device, kWho, detail::concat("creating the geometry of ", what));
+        if (moving) rtcSetGeometryTimeStepCount(g.handle, 2);
+        rtcSetGeometryUserData(g.handle, &geometries.back());
+        if (ribbons) {
+            addRibbons(g, mine, m, moving, what);
+            rtcSetGeometryIntersectFilterFunction(g.handle, segmentHits);
+        } else {
+            rtcSetGeometryUserPrimitiveCount(g.handle, static_cast<unsigned>(mine.size()));
+            rtcSetGeometryBoundsFunction(g.handle, primitiveBounds, nullptr);
+            rtcSetGeometryIntersectFunction(g.handle, primitiveHits);
+        }
+        rtcCommitGeometry(g.handle);
+        rtcAttachGeometry(embreeScene, g.handle);
+        throwIfEmbreeFailed(device, kWho, detail::concat("on ", what));
+    }
+
+    // Embree's hierarchy over the surfaces: one geometry per object (two for
+    // hair with wide segments), with a second time step for a moving one
+    // (its boxes follow it).
     void build(const Scene& scene) {
         const auto& primitives = surfaces.all();
         if (primitives.empty()) return;
@@ -191,7 +231,7 @@ struct RayCaster::Impl {
         sceneBox.pad(pad);
         double widestRibbon = 0.0;  // radius as Embree is given it
         for (const Primitive& p : primitives)
-            if (p.kind == PrimitiveKind::Segment) {
+            if (p.kind == PrimitiveKind::Segment && !wideSegment(surfaces.segment(p))) {
                 const ScenePrimitives::Segment& s = surfaces.segment(p);
                 widestRibbon = std::max(widestRibbon, std::max(s.r0, s.r1) + pad);
             }
@@ -205,31 +245,21 @@ struct RayCaster::Impl {
         std::size_t objects = 0;
         for (std::size_t i = 0; i < primitives.size(); ++i)
             if (i == 0 || primitives[i].object != primitives[i - 1].object) ++objects;
-        geometries.reserve(objects);  // the geometries point at their entries
+        geometries.reserve(2 * objects);  // the geometries point at their entries
+        members.reserve(2 * objects);
         for (std::size_t first = 0; first < primitives.size();) {
             const std::uint32_t object = primitives[first].object;
             std::size_t end = first + 1;
             while (end < primitives.size() && primitives[end].object == object) ++end;
-            const Vec3& m = surfaces.motion(object);
-            const bool moving = m[0] != 0.0 || m[1] != 0.0 || m[2] != 0.0;
-            geometries.push_back({&surfaces, static_cast<std::uint32_t>(first), pad});
             const std::string what = detail::concat("object ", object, " '", detail::clip(scene.objects[object].name), "'");
-            const bool hair = primitives[first].kind == PrimitiveKind::Segment;  // a curves object has only segments
-            OwnedGeometry g(rtcNewGeometry(device, hair ? RTC_GEOMETRY_TYPE_FLAT_LINEAR_CURVE : RTC_GEOMETRY_TYPE_USER));
-            throwIfEmbreeFailed(device, kWho, detail::concat("creating the geometry of ", what));
-            if (moving) rtcSetGeometryTimeStepCount(g.handle, 2);
-            rtcSetGeometryUserData(g.handle, &geometries.back());
-            if (hair) {
-                addRibbons(g, first, end, m, moving, what);
-                rtcSetGeometryIntersectFilterFunction(g.handle, segmentHits);
-            } else {
-                rtcSetGeometryUserPrimitiveCount(g.handle, static_cast<unsigned>(end - first));
-                rtcSetGeometryBoundsFunction(g.handle, primitiveBounds, nullptr);
-                rtcSetGeometryIntersectFunction(g.handle, primitiveHits);
+            std::vector<std::uint32_t> ribbons, boxes;
+            for (std::size_t i = first; i < end; ++i) {
+                const Primitive& p = primitives[i];
+                const bool ribbon = p.kind == PrimitiveKind::Segment && !wideSegment(surfaces.segment(p));
+                (ribbon ? ribbons : boxes).push_back(static_cast<std::uint32_t>(i));
             }
-            rtcCommitGeometry(g.handle);
-            rtcAttachGeometry(embreeScene, g.handle);
-            throwIfEmbreeFailed(device, kWho, detail::concat("on ", what));
+            if (!ribbons.empty()) addGeometry(object, std::move(ribbons), true, what);
+            if (!boxes.empty()) addGeometry(object, std::move(boxes), false, what);
             first = end;
         }
         rtcCommitScene(embreeScene);
