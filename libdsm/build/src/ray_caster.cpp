@@ -70,8 +70,8 @@ constexpr const char* kWho = "ray caster";  // in Embree's errors
 // Primitives of one object as one Embree geometry: hair as Embree's own
 // ray-facing ribbons, widened by `pad` (found through oriented boxes around
 // the strands, far tighter than axis-aligned ones around diagonal hair),
-// other surfaces, and hair segments at least as wide as they are long, as
-// user geometry (boxes). Embree's primitive k is all()[members[k]].
+// other surfaces, and hair segments whose half-width reaches their length,
+// as user geometry (boxes). Embree's primitive k is all()[members[k]].
 struct ObjectGeometry {
     const ScenePrimitives* surfaces;
     const std::uint32_t* members;
