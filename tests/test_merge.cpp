@@ -416,6 +416,14 @@ struct RegionBuild {
     }
 };
 
+// `parts` stitched into `out` (dsm-merge --mode stitch); returns out's path.
+std::string stitch(const std::vector<std::string>& parts, const std::filesystem::path& out) {
+    MergeOptions options;
+    options.mode = MergeMode::Stitch;
+    mergeMaps(parts, out.string(), options);
+    return out.string();
+}
+
 TEST(MergeStitch, RegionBuildsBecomeTheFullBuildByteForByte) {
     TempDir dir;
     const RegionBuild b;
@@ -430,10 +438,7 @@ TEST(MergeStitch, RegionBuildsBecomeTheFullBuildByteForByte) {
         for (std::size_t i = 0; i < splits[s].size(); ++i)
             parts.push_back(b.build(dir / ("part" + std::to_string(s) + std::to_string(i) + ".dsm"), splits[s][i]));
         std::reverse(parts.begin(), parts.end());  // the order of the inputs does not matter
-        MergeOptions options;
-        options.mode = MergeMode::Stitch;
-        const std::string out = (dir / ("stitched" + std::to_string(s) + ".dsm")).string();
-        mergeMaps(parts, out, options);
+        const std::string out = stitch(parts, dir / ("stitched" + std::to_string(s) + ".dsm"));
         EXPECT_EQ(readFile(out), readFile(full)) << "split " << s;
     }
 }
@@ -447,10 +452,7 @@ TEST(MergeStitch, ZstdPartsBecomeTheZstdBuildByteForByte) {
     const std::string full = b.build(dir / "full.dsm", {0, 0, 0, 0});
     const std::vector<std::string> parts = {b.build(dir / "left.dsm", {0, 0, 13, 29}),
                                             b.build(dir / "right.dsm", {13, 0, 37, 29})};
-    MergeOptions options;
-    options.mode = MergeMode::Stitch;
-    const std::string out = (dir / "stitched.dsm").string();
-    mergeMaps(parts, out, options);
+    const std::string out = stitch(parts, dir / "stitched.dsm");
     EXPECT_EQ(DeepShadowMap::open(out)->info().codec, dsm::TileCodec::Zstd);
     EXPECT_EQ(readFile(out), readFile(full));
 }
@@ -464,11 +466,7 @@ TEST(MergeStitch, CentredPartsBecomeTheCentredBuildByteForByte) {
     const std::string full = b.build(dir / "full.dsm", {0, 0, 0, 0});
     const std::vector<std::string> parts = {b.build(dir / "left.dsm", {0, 0, 13, 29}),
                                             b.build(dir / "right.dsm", {13, 0, 37, 29})};
-    MergeOptions options;
-    options.mode = MergeMode::Stitch;
-    const std::string out = (dir / "stitched.dsm").string();
-    mergeMaps(parts, out, options);
-    EXPECT_EQ(readFile(out), readFile(full));
+    EXPECT_EQ(readFile(stitch(parts, dir / "stitched.dsm")), readFile(full));
 }
 
 // A compression this version does not know cannot have its mip levels rebuilt.

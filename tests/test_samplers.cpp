@@ -416,6 +416,26 @@ TEST(ScanlineHider, BucketsDoNotDependOnTheThreadCount) {
 // Rays aimed into random primitives' boxes, from inside them, from near
 // and from far, at random shutter times: the ray caster must give each the
 // crossings that testing every primitive gives. Returns how many it found.
+// Whether the ray caster gives one ray every crossing (depth and object)
+// that testing every primitive gives; adds their number to `crossings`.
+::testing::AssertionResult castsEveryCrossing(const dsm::RayCaster& caster, const dsm::Vec3& origin,
+                                              const dsm::Vec3& direction, double time, std::size_t& crossings) {
+    dsm::RaySurfaceHits found, expected;
+    caster.surfaceHits(origin, direction, time, 0.0, found);
+    for (const dsm::Primitive& p : caster.surfaces().all())
+        caster.surfaces().intersect(p, origin, direction, time, 0.0, expected);
+    const auto key = [](const dsm::RaySurfaceHit& h) { return std::tie(h.t, h.object); };
+    const auto byKey = [&](const dsm::RaySurfaceHit& a, const dsm::RaySurfaceHit& b) { return key(a) < key(b); };
+    std::sort(found.begin(), found.end(), byKey);
+    std::sort(expected.begin(), expected.end(), byKey);
+    if (found.size() != expected.size())
+        return ::testing::AssertionFailure() << found.size() << " crossings found, " << expected.size() << " expected";
+    for (std::size_t i = 0; i < found.size(); ++i)
+        if (key(found[i]) != key(expected[i])) return ::testing::AssertionFailure() << "crossing " << i;
+    crossings += found.size();
+    return ::testing::AssertionSuccess();
+}
+
 std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& rng) {
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const dsm::RayCaster caster(scene);
@@ -437,21 +457,9 @@ std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& r
         const dsm::Vec3 origin{target[0] + distance * away[0], target[1] + distance * away[1],
                                target[2] + distance * away[2]};
         const dsm::Vec3 direction = distance == 0.0 ? away : dsm::Vec3{-away[0], -away[1], -away[2]};
-        dsm::RaySurfaceHits found, expected;
-        caster.surfaceHits(origin, direction, time, 0.0, found);
-        for (const dsm::Primitive& p : all) surfaces.intersect(p, origin, direction, time, 0.0, expected);
-        const auto key = [](const dsm::RaySurfaceHit& h) { return std::tie(h.t, h.object); };
-        const auto byKey = [&](const dsm::RaySurfaceHit& a, const dsm::RaySurfaceHit& b) { return key(a) < key(b); };
-        std::sort(found.begin(), found.end(), byKey);
-        std::sort(expected.begin(), expected.end(), byKey);
-        EXPECT_EQ(found.size(), expected.size()) << "ray " << r;
-        if (found.size() != expected.size()) return crossings;
-        for (std::size_t i = 0; i < found.size(); ++i)
-            if (key(found[i]) != key(expected[i])) {
-                ADD_FAILURE() << "ray " << r << ", crossing " << i;
-                return crossings;
-            }
-        crossings += found.size();
+        const ::testing::AssertionResult same = castsEveryCrossing(caster, origin, direction, time, crossings);
+        EXPECT_TRUE(same) << "ray " << r;
+        if (!same) return crossings;
     }
     EXPECT_GT(crossings, rays / 2);  // the rays do meet the surfaces
     return crossings;
@@ -528,22 +536,13 @@ TEST(RayCaster, FindsCrossingsOfSegmentsFarWiderThanLong) {
     )",
                                              dir.path().string(), "wide.json");
     const dsm::RayCaster caster(scene);
-    const dsm::ScenePrimitives& surfaces = caster.surfaces();
     const dsm::detail::LightRayFrame frame = dsm::detail::lightRayFrame(dsm::lightCamera(scene.light), 31, 29);
-    const auto byDepth = [](const dsm::RaySurfaceHit& a, const dsm::RaySurfaceHit& b) { return a.t < b.t; };
     std::size_t crossings = 0;
     for (int i = 0; i < 40; ++i)
         for (int j = 0; j < 40; ++j) {
             dsm::Vec3 o, d;
             frame.ray(20 + i / 20.0, 11 + j / 20.0, o, d);
-            dsm::RaySurfaceHits found, expected;
-            caster.surfaceHits(o, d, 0.0, 0.0, found);
-            for (const dsm::Primitive& p : surfaces.all()) surfaces.intersect(p, o, d, 0.0, 0.0, expected);
-            std::sort(found.begin(), found.end(), byDepth);
-            std::sort(expected.begin(), expected.end(), byDepth);
-            ASSERT_EQ(found.size(), expected.size()) << "ray " << i << ", " << j;
-            for (std::size_t k = 0; k < found.size(); ++k) ASSERT_EQ(found[k].t, expected[k].t);
-            crossings += found.size();
+            ASSERT_TRUE(castsEveryCrossing(caster, o, d, 0.0, crossings)) << "ray " << i << ", " << j;
         }
     EXPECT_GT(crossings, 3000u);  // the rays meet the mesh and the segment
 }

@@ -230,12 +230,6 @@ struct RayCaster::Impl {
         pad = kBoxSlack * size + std::numeric_limits<double>::min();
         sceneBox.pad(pad);
         double widestRibbon = 0.0;  // radius as Embree is given it
-        for (const Primitive& p : primitives)
-            if (p.kind == PrimitiveKind::Segment && !wideSegment(surfaces.segment(p))) {
-                const ScenePrimitives::Segment& s = surfaces.segment(p);
-                widestRibbon = std::max(widestRibbon, std::max(s.r0, s.r1) + pad);
-            }
-        startBeforeTheBox = pad + kRibbonRadiiBeforeTheBox * widestRibbon;
 
         device = newEmbreeDevice(kWho);
         embreeScene = rtcNewScene(device);
@@ -257,11 +251,16 @@ struct RayCaster::Impl {
                 const Primitive& p = primitives[i];
                 const bool ribbon = p.kind == PrimitiveKind::Segment && !wideSegment(surfaces.segment(p));
                 (ribbon ? ribbons : boxes).push_back(static_cast<std::uint32_t>(i));
+                if (ribbon) {
+                    const ScenePrimitives::Segment& s = surfaces.segment(p);
+                    widestRibbon = std::max(widestRibbon, std::max(s.r0, s.r1) + pad);
+                }
             }
             if (!ribbons.empty()) addGeometry(object, std::move(ribbons), true, what);
             if (!boxes.empty()) addGeometry(object, std::move(boxes), false, what);
             first = end;
         }
+        startBeforeTheBox = pad + kRibbonRadiiBeforeTheBox * widestRibbon;  // read only by surfaceHits()
         rtcCommitScene(embreeScene);
         throwIfEmbreeFailed(device, kWho, "building the hierarchy");
     }
