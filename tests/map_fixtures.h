@@ -74,6 +74,10 @@ inline void writeMap(const std::filesystem::path& path, WriterOptions options, c
 inline ::testing::AssertionResult sameFunction(const VisibilityView& got, const VisibilityFunction& want,
                                                bool mapHasCounts) {
     auto fail = [&] { return ::testing::AssertionFailure(); };
+    // A pixel without vertices is fully lit whatever its channels, and the
+    // writer stores it monochrome (spec section 4).
+    if (want.empty() && got.empty() && got.layerCount() == 1 && want.layerCount() == 1)
+        return ::testing::AssertionSuccess();
     if (got.channels() != want.channels())
         return fail() << "channels " << got.channels() << " != " << want.channels();
     if (got.size() != want.size()) return fail() << "vertex count " << got.size() << " != " << want.size();

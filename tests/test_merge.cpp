@@ -469,6 +469,47 @@ TEST(MergeStitch, CentredPartsBecomeTheCentredBuildByteForByte) {
     EXPECT_EQ(readFile(stitch(parts, dir / "stitched.dsm")), readFile(full));
 }
 
+// A part whose tile has no vertex in its region stores that tile as empty,
+// without pixel flags, while the full build's tile holds vertices elsewhere and
+// pixels without vertices made as RGB. The writer stores every pixel without
+// vertices as monochrome, so the stitch still gives the full build's bytes.
+// The scene is one scripts/soak-scenes found (an RGB map, a filter narrower
+// than a pixel, so that some pixels catch no sample).
+TEST(MergeStitch, RgbPartsWithAnEmptyTileBecomeTheFullBuildByteForByte) {
+    TempDir dir;
+    const Scene scene = dsm::parseScene(R"({
+      "light": {"type": "spot", "position": [-5.6694082810413295, 5.372457428154316, -4.989261545331091],
+                "direction": [6.570777264271524, -5.582391320455543, 4.229185594036345],
+                "fov": 128.59215803351785, "near": 4.9541781484759815, "resolution": [7, 22]},
+      "objects": [
+        {"type": "sphere", "center": [-0.8415343809572021, -1.1732564902699396, -1.3743557664937507],
+         "radius": 2.090525567397186, "opacity": [0.10144711365884151, 0.36897738780950406, 0.538761378699722]},
+        {"type": "hair", "hairball": {"center": [-0.9855515179699892, 0.414219899396816, -0.7169484825362746],
+                                      "radius": 0.7730856808254819, "count": 49, "length": 0.6093191906252517,
+                                      "curl": 6.869809352378073, "width": 0.01, "segments": 9, "seed": 615},
+         "opacity": [0.7207399249517827, 0.3532989783980076, 0.9576806390696524]}]})",
+                                        "", "soak");
+    BuildOptions options;
+    options.samplesPerPixel = 2;
+    options.filter = dsm::PixelFilter::Triangle;
+    options.filterWidth = 0.5;
+    options.tileSize = 64;
+    options.mtsmLayers = 2;
+    options.seed = 61;
+    options.threads = 1;
+    const auto build = [&](const std::filesystem::path& path, std::array<std::uint32_t, 4> region) {
+        BuildOptions o = options;
+        o.region = region;
+        buildMap(scene, o, path.string());
+        return path.string();
+    };
+    const std::string full = build(dir / "full.dsm", {0, 0, 0, 0});
+    const std::string top = build(dir / "top.dsm", {0, 0, 7, 12});
+    ASSERT_TRUE(DeepShadowMap::open(top)->tile(0, 0, 0).empty());  // the case this test is about
+    const std::vector<std::string> parts = {top, build(dir / "bottom.dsm", {0, 12, 7, 22})};
+    EXPECT_TRUE(readFile(stitch(parts, dir / "stitched.dsm")) == readFile(full));
+}
+
 // A compression this version does not know cannot have its mip levels rebuilt.
 TEST(MergeStitch, AnUnknownCompressionSettingIsRefused) {
     TempDir dir;

@@ -257,6 +257,31 @@ TEST(TileCoding, CodedTilesRoundTripBitForBit) {
     }
 }
 
+// A pixel without vertices is written monochrome in both layouts, so a map's
+// bytes do not depend on the channels its empty pixels were made with: a
+// stitch, whose parts store a tile without vertices as empty, relies on it.
+TEST(TileCoding, EmptyPixelsAreWrittenAlikeWhateverTheirChannels) {
+    TempDir dir;
+    const auto image = [](int emptyChannels) {
+        return dsm::test::makeImage(6, 5, [=](std::uint32_t x, std::uint32_t y) {
+            if ((x + y) % 3 != 0) return VisibilityFunction(emptyChannels, true);
+            std::mt19937_64 rng(x * 7 + y);
+            return dsm::test::randomFunction(rng, 3, true, 1, 5);
+        });
+    };
+    for (bool coded : {true, false}) {
+        WriterOptions o = smallMap(0.05);
+        o.formatMinor = coded ? 1 : 0;
+        const auto rgb = dir / "empty-rgb.dsm", mono = dir / "empty-mono.dsm";
+        dsm::test::writeMap(rgb, o, image(3), 7);
+        dsm::test::writeMap(mono, o, image(1), 7);
+        EXPECT_TRUE(dsm::test::readFile(rgb) == dsm::test::readFile(mono)) << "coded " << coded;
+        const auto map = DeepShadowMap::open(rgb.string());
+        EXPECT_EQ(map->pixel(0, 1, 0)->channels(), 1) << "coded " << coded;
+        EXPECT_EQ(map->pixel(0, 0, 0)->channels(), 3) << "coded " << coded;
+    }
+}
+
 // The same content written as 1.0 and as 1.1 reads back the same, and the
 // 1.1 tiles are smaller.
 TEST(TileCoding, FormatOneZeroFilesStillReadAndOneOneTilesAreSmaller) {

@@ -53,13 +53,18 @@ std::uint32_t valueKey(float v, double step) {
     return static_cast<std::uint32_t>(multiple);
 }
 
+// A pixel's flag byte. A pixel without vertices is fully lit whatever its
+// channels, and is written monochrome: its bytes then do not depend on how
+// it was made (a stitch's empty part, a builder's empty RGB pixel).
+std::uint8_t pixelFlags(const VisibilityFunction& f) { return f.channels() == 3 && !f.empty() ? kPixelRgb : 0; }
+
 // The 1.0 layout: the pixel table, then per pixel raw arrays.
 std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pixels, const TileLayout& layout) {
     std::vector<std::uint8_t> raw;
     ByteWriter w(raw);
     std::uint32_t running = 0;
     for (const VisibilityFunction& f : pixels) w.u32(running += static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(f.channels() == 3 ? kPixelRgb : 0);
+    for (const VisibilityFunction& f : pixels) w.u8(pixelFlags(f));
     for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
     w.zeros(pixelTableBytes(pixels.size()) - pixels.size() * 6);
     for (const VisibilityFunction& f : pixels) {
@@ -83,7 +88,7 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     std::vector<std::uint8_t> raw;
     ByteWriter w(raw);
     for (const VisibilityFunction& f : pixels) w.varint(static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(f.channels() == 3 ? kPixelRgb : 0);
+    for (const VisibilityFunction& f : pixels) w.u8(pixelFlags(f));
     for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
     for (const VisibilityFunction& f : pixels)
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer)
