@@ -257,27 +257,40 @@ TEST(TileCoding, CodedTilesRoundTripBitForBit) {
     }
 }
 
-// A pixel without vertices is written monochrome in both layouts, so a map's
-// bytes do not depend on the channels its empty pixels were made with: a
-// stitch, whose parts store a tile without vertices as empty, relies on it.
-TEST(TileCoding, EmptyPixelsAreWrittenAlikeWhateverTheirChannels) {
+// A grey pixel (no vertices, or its channels equal at every vertex) is written
+// monochrome in both layouts, so a map's bytes do not depend on the channels
+// its grey pixels were made with: a stitch, whose parts store a tile without
+// vertices as empty, relies on it.
+TEST(TileCoding, GreyPixelsAreWrittenAlikeWhateverTheirChannels) {
     TempDir dir;
-    const auto image = [](int emptyChannels) {
+    const auto image = [](int greyChannels) {
         return dsm::test::makeImage(6, 5, [=](std::uint32_t x, std::uint32_t y) {
-            if ((x + y) % 3 != 0) return VisibilityFunction(emptyChannels, true);
+            if ((x + y) % 3 == 1) return VisibilityFunction(greyChannels, true);
             std::mt19937_64 rng(x * 7 + y);
+            if ((x + y) % 3 == 2) {
+                const VisibilityFunction grey = dsm::test::randomFunction(rng, 1, true, 1, 5);
+                if (greyChannels == 1) return grey;
+                VisibilityFunction rgb(3, true);
+                for (std::size_t i = 0; i < grey.size(); ++i) {
+                    const float v[3] = {grey.value(i, 0), grey.value(i, 0), grey.value(i, 0)};
+                    rgb.append(grey.z(i), v, grey.count(i));
+                }
+                return rgb;
+            }
             return dsm::test::randomFunction(rng, 3, true, 1, 5);
         });
     };
     for (bool coded : {true, false}) {
         WriterOptions o = smallMap(0.05);
         o.formatMinor = coded ? 1 : 0;
-        const auto rgb = dir / "empty-rgb.dsm", mono = dir / "empty-mono.dsm";
+        const auto rgb = dir / "grey-rgb.dsm", mono = dir / "grey-mono.dsm";
         dsm::test::writeMap(rgb, o, image(3), 7);
         dsm::test::writeMap(mono, o, image(1), 7);
         EXPECT_TRUE(dsm::test::readFile(rgb) == dsm::test::readFile(mono)) << "coded " << coded;
         const auto map = DeepShadowMap::open(rgb.string());
-        EXPECT_EQ(map->pixel(0, 1, 0)->channels(), 1) << "coded " << coded;
+        EXPECT_EQ(map->pixel(0, 1, 0)->channels(), 1) << "coded " << coded;  // no vertices
+        EXPECT_EQ(map->pixel(0, 2, 0)->channels(), 1) << "coded " << coded;  // grey
+        EXPECT_GT(map->pixel(0, 2, 0)->size(), 0u);
         EXPECT_EQ(map->pixel(0, 0, 0)->channels(), 3) << "coded " << coded;
     }
 }

@@ -53,10 +53,12 @@ std::uint32_t valueKey(float v, double step) {
     return static_cast<std::uint32_t>(multiple);
 }
 
-// A pixel's flag byte. A pixel without vertices is fully lit whatever its
-// channels, and is written monochrome: its bytes then do not depend on how
-// it was made (a stitch's empty part, a builder's empty RGB pixel).
-std::uint8_t pixelFlags(const VisibilityFunction& f) { return f.channels() == 3 && !f.empty() ? kPixelRgb : 0; }
+// Whether a pixel is written with three values a vertex: only when its
+// channels differ somewhere. A grey pixel (values equal at every vertex as
+// stored, or no vertices at all) is written monochrome, in a third of the
+// room, and its bytes do not depend on how it was made (a stitch's empty
+// part, a builder's empty RGB pixel, channels that met on the value step).
+bool writtenRgb(const VisibilityFunction& f) { return f.channels() == 3 && !f.isMonochrome(); }
 
 // The 1.0 layout: the pixel table, then per pixel raw arrays.
 std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pixels, const TileLayout& layout) {
@@ -64,13 +66,14 @@ std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pix
     ByteWriter w(raw);
     std::uint32_t running = 0;
     for (const VisibilityFunction& f : pixels) w.u32(running += static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(pixelFlags(f));
+    for (const VisibilityFunction& f : pixels) w.u8(writtenRgb(f) ? kPixelRgb : 0);
     for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
     w.zeros(pixelTableBytes(pixels.size()) - pixels.size() * 6);
     for (const VisibilityFunction& f : pixels) {
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer) w.u32(static_cast<std::uint32_t>(f.layerBegin(layer)));
         for (float z : f.depths()) w.f32(z);
-        for (float v : f.allValues()) w.f32(v);
+        for (std::size_t i = 0; i < f.size(); ++i)
+            for (int k = 0; k < (writtenRgb(f) ? 3 : 1); ++k) w.f32(f.value(i, k));
         if (layout.hasCounts)
             for (std::size_t i = 0; i < f.size(); ++i) w.u32(f.count(i));
     }
@@ -88,7 +91,7 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     std::vector<std::uint8_t> raw;
     ByteWriter w(raw);
     for (const VisibilityFunction& f : pixels) w.varint(static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(pixelFlags(f));
+    for (const VisibilityFunction& f : pixels) w.u8(writtenRgb(f) ? kPixelRgb : 0);
     for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
     for (const VisibilityFunction& f : pixels)
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer)
@@ -120,7 +123,7 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     // 1 at a layer's first vertex).
     const std::uint32_t one = valueKey(1.0f, layout.valueStep);
     for (const VisibilityFunction& f : pixels) {
-        const int c = f.channels();
+        const int c = writtenRgb(f) ? 3 : 1;
         std::uint32_t previous[3] = {one, one, one};
         std::size_t nextLayer = 1;
         for (std::size_t i = 0; i < f.size(); ++i) {
