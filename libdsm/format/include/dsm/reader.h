@@ -79,9 +79,9 @@ public:
     const TileCache& cache() const;
 
     /// The function of pixel (x, y) of a level (0 = full resolution). Its
-    /// channels are those the file stores for it: a pixel without vertices
-    /// (V = 1 at every depth) is stored, and read, as monochrome by libdsm's
-    /// writer; other writers may store it as RGB in an RGB map.
+    /// channels are those the file stores for it: libdsm's writer stores a
+    /// grey pixel (no vertices, or channels equal at every vertex) as
+    /// monochrome, so it reads so; other writers may store it as RGB.
     PixelFunction pixel(unsigned level, std::uint32_t x, std::uint32_t y) const;
     /// Directory entry of tile (tx, ty) of a level.
     TileSummary tile(unsigned level, std::uint32_t tx, std::uint32_t ty) const;
