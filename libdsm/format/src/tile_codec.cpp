@@ -72,8 +72,9 @@ std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pix
     for (const VisibilityFunction& f : pixels) {
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer) w.u32(static_cast<std::uint32_t>(f.layerBegin(layer)));
         for (float z : f.depths()) w.f32(z);
+        const int channels = writtenRgb(f) ? 3 : 1;
         for (std::size_t i = 0; i < f.size(); ++i)
-            for (int k = 0; k < (writtenRgb(f) ? 3 : 1); ++k) w.f32(f.value(i, k));
+            for (int k = 0; k < channels; ++k) w.f32(f.value(i, k));
         if (layout.hasCounts)
             for (std::size_t i = 0; i < f.size(); ++i) w.u32(f.count(i));
     }
