@@ -413,9 +413,6 @@ TEST(ScanlineHider, BucketsDoNotDependOnTheThreadCount) {
     EXPECT_TRUE(bytes[0] == bytes[1]);
 }
 
-// Rays aimed into random primitives' boxes, from inside them, from near
-// and from far, at random shutter times: the ray caster must give each the
-// crossings that testing every primitive gives. Returns how many it found.
 // Whether the ray caster gives one ray every crossing (depth and object)
 // that testing every primitive gives; adds their number to `crossings`.
 ::testing::AssertionResult castsEveryCrossing(const dsm::RayCaster& caster, const dsm::Vec3& origin,
@@ -436,6 +433,9 @@ TEST(ScanlineHider, BucketsDoNotDependOnTheThreadCount) {
     return ::testing::AssertionSuccess();
 }
 
+// Rays aimed into random primitives' boxes, from inside them, from near
+// and from far, at random shutter times: the ray caster must give each the
+// crossings that testing every primitive gives. Returns how many it found.
 std::size_t expectEveryCrossingFound(const dsm::Scene& scene, std::mt19937_64& rng) {
     std::uniform_real_distribution<double> unit(0.0, 1.0);
     const dsm::RayCaster caster(scene);

@@ -249,12 +249,10 @@ struct RayCaster::Impl {
             std::vector<std::uint32_t> ribbons, boxes;
             for (std::size_t i = first; i < end; ++i) {
                 const Primitive& p = primitives[i];
-                const bool ribbon = p.kind == PrimitiveKind::Segment && !wideSegment(surfaces.segment(p));
+                const ScenePrimitives::Segment* s = p.kind == PrimitiveKind::Segment ? &surfaces.segment(p) : nullptr;
+                const bool ribbon = s != nullptr && !wideSegment(*s);
                 (ribbon ? ribbons : boxes).push_back(static_cast<std::uint32_t>(i));
-                if (ribbon) {
-                    const ScenePrimitives::Segment& s = surfaces.segment(p);
-                    widestRibbon = std::max(widestRibbon, std::max(s.r0, s.r1) + pad);
-                }
+                if (ribbon) widestRibbon = std::max(widestRibbon, std::max(s->r0, s->r1) + pad);
             }
             if (!ribbons.empty()) addGeometry(object, std::move(ribbons), true, what);
             if (!boxes.empty()) addGeometry(object, std::move(boxes), false, what);

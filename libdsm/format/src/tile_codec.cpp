@@ -53,12 +53,23 @@ std::uint32_t valueKey(float v, double step) {
     return static_cast<std::uint32_t>(multiple);
 }
 
-// Whether a pixel is written with three values a vertex: only when its
-// channels differ somewhere. A grey pixel (values equal at every vertex as
-// stored, or no vertices at all) is written monochrome, in a third of the
-// room, and its bytes do not depend on how it was made (a stitch's empty
-// part, a builder's empty RGB pixel, channels that met on the value step).
-bool writtenRgb(const VisibilityFunction& f) { return f.channels() == 3 && !f.isMonochrome(); }
+// Appends each pixel's flag byte to `raw` and returns where they begin. A
+// pixel is flagged RGB only when its channels differ somewhere: a grey pixel
+// (values equal at every vertex as stored, or no vertices at all) is written
+// monochrome, in a third of the room, and its bytes do not depend on how it
+// was made (a stitch's empty part, a builder's empty RGB pixel, channels that
+// met on the value step).
+std::size_t writePixelFlags(std::span<const VisibilityFunction> pixels, std::vector<std::uint8_t>& raw) {
+    const std::size_t begin = raw.size();
+    for (const VisibilityFunction& f : pixels) raw.push_back(f.channels() == 3 && !f.isMonochrome() ? kPixelRgb : 0);
+    return begin;
+}
+
+// How many values a vertex pixel `p` is written with, as its flag (at `flags` in
+// `raw`) says: the pixels are not tested again.
+int writtenChannels(const std::vector<std::uint8_t>& raw, std::size_t flags, std::size_t p) {
+    return (raw[flags + p] & kPixelRgb) ? 3 : 1;
+}
 
 // The 1.0 layout: the pixel table, then per pixel raw arrays.
 std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pixels, const TileLayout& layout) {
@@ -66,13 +77,14 @@ std::vector<std::uint8_t> plainTileBytes(std::span<const VisibilityFunction> pix
     ByteWriter w(raw);
     std::uint32_t running = 0;
     for (const VisibilityFunction& f : pixels) w.u32(running += static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(writtenRgb(f) ? kPixelRgb : 0);
+    const std::size_t flags = writePixelFlags(pixels, raw);
     for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
     w.zeros(pixelTableBytes(pixels.size()) - pixels.size() * 6);
-    for (const VisibilityFunction& f : pixels) {
+    for (std::size_t p = 0; p < pixels.size(); ++p) {
+        const VisibilityFunction& f = pixels[p];
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer) w.u32(static_cast<std::uint32_t>(f.layerBegin(layer)));
         for (float z : f.depths()) w.f32(z);
-        const int channels = writtenRgb(f) ? 3 : 1;
+        const int channels = writtenChannels(raw, flags, p);
         for (std::size_t i = 0; i < f.size(); ++i)
             for (int k = 0; k < channels; ++k) w.f32(f.value(i, k));
         if (layout.hasCounts)
@@ -92,7 +104,7 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     std::vector<std::uint8_t> raw;
     ByteWriter w(raw);
     for (const VisibilityFunction& f : pixels) w.varint(static_cast<std::uint32_t>(f.size()));
-    for (const VisibilityFunction& f : pixels) w.u8(writtenRgb(f) ? kPixelRgb : 0);
+    const std::size_t flags = writePixelFlags(pixels, raw);
     for (const VisibilityFunction& f : pixels) w.u8(static_cast<std::uint8_t>(f.layerCount()));
     for (const VisibilityFunction& f : pixels)
         for (std::size_t layer = 1; layer < f.layerCount(); ++layer)
@@ -123,8 +135,9 @@ std::vector<std::uint8_t> codedTileBytes(std::span<const VisibilityFunction> pix
     // Values: per channel, the fall from the previous vertex of the layer (from
     // 1 at a layer's first vertex).
     const std::uint32_t one = valueKey(1.0f, layout.valueStep);
-    for (const VisibilityFunction& f : pixels) {
-        const int c = writtenRgb(f) ? 3 : 1;
+    for (std::size_t p = 0; p < pixels.size(); ++p) {
+        const VisibilityFunction& f = pixels[p];
+        const int c = writtenChannels(raw, flags, p);
         std::uint32_t previous[3] = {one, one, one};
         std::size_t nextLayer = 1;
         for (std::size_t i = 0; i < f.size(); ++i) {
